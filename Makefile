@@ -1,0 +1,24 @@
+# Set-up is part of every target: `make test` and `make demo` create .venv and install into it.
+PYTHON ?= $(shell command -v python3.11 || command -v python3)
+VENV := .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: test demo bench clean
+
+$(STAMP): pyproject.toml setup.py cft_action/_guard.c
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[test,bench]'
+	touch $(STAMP)
+
+test: $(STAMP)
+	$(PY) -m pytest
+
+demo: $(STAMP)
+	$(PY) demos/load_demo.py
+
+bench: $(STAMP)
+	$(PY) benchmarks/sweep.py
+
+clean:
+	rm -rf $(VENV) build *.egg-info cft_action/*.so

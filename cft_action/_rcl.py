@@ -1,0 +1,261 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""The ctypes binding to rcl: the only module that knows C signatures and struct layouts.
+
+Jazzy's rclpy exposes no content-filter API, but ``librcl.so`` exports one. Each C symbol is
+declared once, in :data:`_SYMBOLS` below, with its argument and return types. Functions that
+return ``rcl_ret_t`` get an ``errcheck`` that turns a non-OK code into :class:`ContentFilterError`
+carrying rcl's own error string, and resets rcl's error state, so nothing fails silently.
+A missing symbol is an error when this module loads, not a crash later.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+from typing import Any, Callable, Optional, Sequence
+
+# Importing rclpy's C extension loads librcl and friends from the installed wheels; we then bind
+# to those very copies instead of guessing paths.
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy  # noqa: F401
+
+RCL_RET_OK = 0
+_RET_NAMES = {
+    1: 'RCL_RET_ERROR',
+    2: 'RCL_RET_TIMEOUT',
+    3: 'RCL_RET_UNSUPPORTED',
+    10: 'RCL_RET_BAD_ALLOC',
+    11: 'RCL_RET_INVALID_ARGUMENT',
+    200: 'RCL_RET_NODE_INVALID',
+    400: 'RCL_RET_SUBSCRIPTION_INVALID',
+}
+RCL_RET_UNSUPPORTED = 3
+
+
+class ContentFilterError(RuntimeError):
+    """A content-filter operation failed; the message carries rcl's own error string.
+
+    :ivar function: the rcl function that failed, or None for a check done in Python.
+    :ivar ret: the ``rcl_ret_t`` it returned, or None.
+    :ivar rcl_error: rcl's error string, as ``rcutils_get_error_string()`` gave it.
+    """
+
+    def __init__(self, message: str, *, function: Optional[str] = None,
+                 ret: Optional[int] = None, rcl_error: str = '') -> None:
+        super().__init__(message)
+        self.function = function
+        self.ret = ret
+        self.rcl_error = rcl_error
+
+
+class BindingUnavailable(RuntimeError):
+    """The rcl libraries or one of the symbols this module needs could not be loaded."""
+
+
+# --- struct layouts (rcutils / rmw / rcl, Jazzy) -------------------------------------------------
+
+class _Allocator(ctypes.Structure):
+    _fields_ = [('allocate', ctypes.c_void_p), ('deallocate', ctypes.c_void_p),
+                ('reallocate', ctypes.c_void_p), ('zero_allocate', ctypes.c_void_p),
+                ('state', ctypes.c_void_p)]
+
+
+class _StringArray(ctypes.Structure):
+    _fields_ = [('size', ctypes.c_size_t), ('data', ctypes.POINTER(ctypes.c_char_p)),
+                ('allocator', _Allocator)]
+
+
+class _ContentFilterOptions(ctypes.Structure):
+    """``rcl_subscription_content_filter_options_t``, which wraps the rmw struct of this shape."""
+
+    _fields_ = [('filter_expression', ctypes.c_char_p), ('expression_parameters', _StringArray)]
+
+
+class _ErrorString(ctypes.Structure):
+    _fields_ = [('str', ctypes.c_char * 1024)]  # RCUTILS_ERROR_MESSAGE_MAX_LENGTH
+
+
+# --- library loading ------------------------------------------------------------------------------
+
+def _loaded_library_path(soname: str) -> str:
+    """Return the path of ``soname`` as already mapped into this process, else the bare name."""
+    try:
+        with open('/proc/self/maps') as maps:
+            for line in maps:
+                path = line.rstrip('\n').split(' ')[-1]
+                if os.path.basename(path) == soname:
+                    return path
+    except OSError:
+        pass
+    return soname  # let the dynamic loader search LD_LIBRARY_PATH
+
+
+def _load(soname: str) -> ctypes.CDLL:
+    try:
+        return ctypes.CDLL(_loaded_library_path(soname))
+    except OSError as e:
+        raise BindingUnavailable(f'cannot load {soname}: {e}') from e
+
+
+_rcutils = _load('librcutils.so')
+_rcl = _load('librcl.so')
+_rcl_action = _load('librcl_action.so')
+
+_rcutils_get_error_string = _rcutils.rcutils_get_error_string
+_rcutils_get_error_string.argtypes = []
+_rcutils_get_error_string.restype = _ErrorString
+_rcutils_reset_error = _rcutils.rcutils_reset_error
+_rcutils_reset_error.argtypes = []
+_rcutils_reset_error.restype = None
+
+
+def take_rcl_error() -> str:
+    """Return rcl's current error string and reset it, so that it cannot leak into a later call."""
+    message = _rcutils_get_error_string().str.decode('utf-8', 'replace')
+    _rcutils_reset_error()
+    return message
+
+
+def _check_rcl_ret(ret: int, func: Any, args: tuple) -> int:
+    if ret != RCL_RET_OK:
+        name = _RET_NAMES.get(ret, str(ret))
+        error = take_rcl_error()
+        raise ContentFilterError(f'{func.__name__} returned {name}: {error}',
+                                 function=func.__name__, ret=ret, rcl_error=error)
+    return ret
+
+
+def _map_symbol(library: ctypes.CDLL, name: str, restype: Any, argtypes: Sequence[Any],
+                errcheck: Optional[Callable] = None) -> Any:
+    try:
+        func = getattr(library, name)
+    except AttributeError as e:
+        raise BindingUnavailable(f'symbol {name} not found in {library._name}') from e
+    func.restype = restype
+    func.argtypes = list(argtypes)
+    if errcheck is not None:
+        func.errcheck = errcheck
+    return func
+
+
+_void_p = ctypes.c_void_p
+_options_p = ctypes.POINTER(_ContentFilterOptions)
+_rcl_ret_t = ctypes.c_int
+
+# name: (library, restype, argtypes, errcheck)
+_SYMBOLS = {
+    'rcl_get_zero_initialized_subscription_content_filter_options':
+        (_rcl, _ContentFilterOptions, [], None),
+    'rcl_subscription_content_filter_options_init':
+        (_rcl, _rcl_ret_t,
+         [_void_p, ctypes.c_char_p, ctypes.c_size_t, ctypes.POINTER(ctypes.c_char_p), _options_p],
+         _check_rcl_ret),
+    'rcl_subscription_content_filter_options_fini':
+        (_rcl, _rcl_ret_t, [_void_p, _options_p], _check_rcl_ret),
+    'rcl_subscription_set_content_filter':
+        (_rcl, _rcl_ret_t, [_void_p, _options_p], _check_rcl_ret),
+    'rcl_subscription_get_content_filter':
+        (_rcl, _rcl_ret_t, [_void_p, _options_p], _check_rcl_ret),
+    'rcl_subscription_is_cft_enabled': (_rcl, ctypes.c_bool, [_void_p], None),
+    'rcl_subscription_is_valid': (_rcl, ctypes.c_bool, [_void_p], None),
+    'rcl_subscription_get_topic_name': (_rcl, ctypes.c_char_p, [_void_p], None),
+    'rcl_action_client_is_valid': (_rcl_action, ctypes.c_bool, [_void_p], None),
+}
+
+
+class _Bound:
+    """Attribute access to the declared symbols: ``_lib.rcl_subscription_is_valid(ptr)``."""
+
+    def __init__(self) -> None:
+        for name, (library, restype, argtypes, errcheck) in _SYMBOLS.items():
+            setattr(self, name, _map_symbol(library, name, restype, argtypes, errcheck))
+
+
+_lib = _Bound()
+
+
+# --- content filters on an rcl_subscription_t* ------------------------------------------------------
+
+def _check_subscription(subscription_ptr: int) -> None:
+    if not subscription_ptr or not _lib.rcl_subscription_is_valid(subscription_ptr):
+        error = take_rcl_error()
+        raise ContentFilterError(f'not a valid rcl subscription: {error}',
+                                 function='rcl_subscription_is_valid', rcl_error=error)
+
+
+def set_content_filter(subscription_ptr: int, expression: str,
+                       parameters: Sequence[str] = ()) -> None:
+    """Set ``expression`` with ``parameters`` (already DDS literals) on an rcl subscription."""
+    _check_subscription(subscription_ptr)
+    encoded = [p.encode() for p in parameters]
+    argv = (ctypes.c_char_p * max(1, len(encoded)))(*encoded)
+    options = _lib.rcl_get_zero_initialized_subscription_content_filter_options()
+    _lib.rcl_subscription_content_filter_options_init(
+        subscription_ptr, expression.encode(), len(encoded), argv, ctypes.byref(options))
+    try:
+        _lib.rcl_subscription_set_content_filter(subscription_ptr, ctypes.byref(options))
+    finally:
+        _lib.rcl_subscription_content_filter_options_fini(subscription_ptr, ctypes.byref(options))
+
+
+def get_content_filter(subscription_ptr: int) -> tuple[str, list[str]]:
+    """Return ``(expression, parameters)`` as the rmw reports them for an rcl subscription."""
+    _check_subscription(subscription_ptr)
+    options = _lib.rcl_get_zero_initialized_subscription_content_filter_options()
+    _lib.rcl_subscription_get_content_filter(subscription_ptr, ctypes.byref(options))
+    try:
+        expression = (options.filter_expression or b'').decode()
+        array = options.expression_parameters
+        parameters = [array.data[i].decode() for i in range(array.size)]
+    finally:
+        _lib.rcl_subscription_content_filter_options_fini(subscription_ptr, ctypes.byref(options))
+    return expression, parameters
+
+
+def is_cft_enabled(subscription_ptr: int) -> bool:
+    """Return whether the rmw applies a content filter to this rcl subscription."""
+    _check_subscription(subscription_ptr)
+    return bool(_lib.rcl_subscription_is_cft_enabled(subscription_ptr))
+
+
+def subscription_topic_name(subscription_ptr: int) -> Optional[str]:
+    """Return the fully qualified topic name of an rcl subscription, or None if it is invalid."""
+    name = _lib.rcl_subscription_get_topic_name(subscription_ptr)
+    if name is None:
+        take_rcl_error()
+        return None
+    return name.decode()
+
+
+# --- private layout: an action client's feedback subscription --------------------------------------
+
+# Jazzy's rcl_action_client_impl_t starts with three rcl_client_t (one pointer each) followed by the
+# feedback rcl_subscription_t. This has held since Foxy, but it is private: every use is verified.
+_FEEDBACK_SUBSCRIPTION_OFFSET = 3 * ctypes.sizeof(ctypes.c_void_p)
+
+
+def action_feedback_subscription(action_client_ptr: int,
+                                 resolved_action_name: str) -> tuple[Optional[int], str]:
+    """Locate the feedback subscription inside an ``rcl_action_client_t``.
+
+    :param action_client_ptr: address of the ``rcl_action_client_t``
+        (``ActionClient._client_handle.pointer``).
+    :param resolved_action_name: the fully qualified action name, after remapping.
+    :return: ``(address, '')`` when the layout check passed, or ``(None, reason)`` when it did not;
+        in that case nothing at the guessed address was touched as a subscription.
+    """
+    if not action_client_ptr or not _lib.rcl_action_client_is_valid(action_client_ptr):
+        return None, f'action client is not valid: {take_rcl_error()}'
+    expected = resolved_action_name + '/_action/feedback'
+    impl = ctypes.c_void_p.from_address(action_client_ptr).value
+    if not impl:
+        return None, 'action client has no implementation'
+    candidate = impl + _FEEDBACK_SUBSCRIPTION_OFFSET
+    # Under the expected layout the candidate is an rcl_subscription_t { impl* }; under another one
+    # it is still a pointer-sized field inside rcl's own allocation, so reading it cannot fault.
+    if not _lib.rcl_subscription_is_valid(candidate):
+        return None, (f'layout check failed: no valid subscription at the expected offset '
+                      f'({take_rcl_error()})')
+    found = subscription_topic_name(candidate)
+    if found != expected:
+        return None, f'layout check failed: found topic {found!r}, expected {expected!r}'
+    return candidate, ''

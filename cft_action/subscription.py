@@ -1,0 +1,270 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""Content-filtered subscriptions for any topic: the Jazzy backport of Kilted's rclpy API.
+
+Kilted's rclpy has ``ContentFilterOptions`` and ``Subscription.set_content_filter``; Jazzy's has
+neither. These functions give the same capability on Jazzy through :mod:`cft_action._rcl`.
+
+rmw_fastrtps destroys and recreates the DataReader on the first non-empty filter, and again when the
+filter is set back to ``""``. A recreation while an executor waits on the subscription is a
+use-after-free, so the first filter is installed here before the subscription is visible to any
+executor, later changes are only in place, and ``""`` is refused.
+"""
+
+from __future__ import annotations
+
+import importlib
+import threading
+import uuid
+from typing import Callable, NamedTuple, Optional, Sequence, Union
+
+import rclpy
+from rclpy.callback_groups import CallbackGroup
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.exceptions import InvalidTopicNameException
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from rclpy.qos_overriding_options import _declare_qos_parameters, QoSOverridingOptions
+from rclpy.subscription import Subscription
+from rclpy.type_support import check_is_valid_msg_type
+from rosidl_parser.definition import AbstractString, Array, BasicType, NamespacedType
+
+from cft_action import _rcl
+from cft_action._rcl import ContentFilterError
+from cft_action.filters import dds_literals, Literal, never_match_on
+
+__all__ = [
+    'ContentFilterError', 'ContentFilterOptions', 'create_filtered_subscription',
+    'get_content_filter', 'is_content_filter_supported', 'is_filtered', 'set_content_filter',
+]
+
+#: rmw implementations of Jazzy whose subscriptions support content filtering.
+CFT_RMW_IMPLEMENTATIONS = frozenset({
+    'rmw_fastrtps_cpp', 'rmw_fastrtps_dynamic_cpp', 'rmw_connextdds',
+})
+
+# rcl documents the content-filter calls as not thread-safe.
+_rcl_lock = threading.Lock()
+_message_lost_warned = False
+
+
+class ContentFilterOptions(NamedTuple):
+    """A filter expression and its parameters, named as in Kilted's rclpy.
+
+    It unpacks as ``(expression, parameters)``.
+    """
+
+    filter_expression: str
+    expression_parameters: list[str]
+
+
+def is_content_filter_supported(node: Node) -> bool:
+    """Return whether the rmw implementation that ``node`` runs on supports content filtering.
+
+    This is a cheap probe, by rmw identifier; it creates nothing. A filter that the rmw then fails to
+    apply is still reported, by :func:`set_content_filter` and :func:`create_filtered_subscription`.
+    """
+    del node  # the rmw is process-wide on Jazzy; the node is taken for a per-node future
+    return rclpy.get_rmw_implementation_identifier() in CFT_RMW_IMPLEMENTATIONS
+
+
+def _apply(subscription_ptr: int, topic: str, expression: str,
+           expression_parameters: Sequence[Literal]) -> None:
+    """Set a filter and verify that the rmw applies it; raise naming the expression if not."""
+    try:
+        parameters = dds_literals(expression_parameters)
+    except (TypeError, ValueError) as e:
+        raise ContentFilterError(
+            f'content filter {expression!r} on {topic}: bad expression parameter: {e}') from e
+    described = f'content filter {expression!r} with parameters {parameters} on {topic}'
+    with _rcl_lock:
+        try:
+            _rcl.set_content_filter(subscription_ptr, expression, parameters)
+        except ContentFilterError as e:
+            raise ContentFilterError(f'{described} was rejected: {e.rcl_error}',
+                                     function=e.function, ret=e.ret, rcl_error=e.rcl_error) from e
+        if not _rcl.is_cft_enabled(subscription_ptr):
+            raise ContentFilterError(f'{described} was accepted but is not applied by '
+                                     f'{rclpy.get_rmw_implementation_identifier()}')
+
+
+def _comparable_field(msg_type, prefix: str = '') -> Optional[str]:
+    """Return the DDS-SQL name of the first primitive field of ``msg_type``, or None."""
+    for name, slot in zip(msg_type.get_fields_and_field_types(), msg_type.SLOT_TYPES):
+        if isinstance(slot, (BasicType, AbstractString)):
+            return prefix + name
+        if isinstance(slot, Array) and isinstance(slot.value_type, (BasicType, AbstractString)):
+            return f'{prefix}{name}[0]'
+        if isinstance(slot, NamespacedType):
+            module = importlib.import_module('.'.join(slot.namespaces))
+            found = _comparable_field(getattr(module, slot.name), f'{prefix}{name}.')
+            if found:
+                return found
+    return None
+
+
+def _validate_on_probe(node: Node, msg_type, qos_profile: QoSProfile, expression: str,
+                       expression_parameters: Sequence[Literal]) -> None:
+    """Let Fast DDS check ``expression`` on a throwaway reader of a private topic.
+
+    rmw_fastrtps destroys the DataReader before it creates the content-filtered topic, and when
+    that creation fails it leaves the subscription with a dangling reader, so a rejected *first*
+    filter must never reach a real subscription. The probe gets a first filter that is valid by
+    construction and never matches, then the user's expression as an in-place change, which Fast
+    DDS rejects cleanly. The probe's topic has no publishers, so no writer sees any of this.
+    """
+    field = _comparable_field(msg_type)
+    if field is None:
+        return  # no primitive field to build a first filter on: the real call reports errors
+    topic = f'/_cft_action_probe/t{uuid.uuid4().hex}'
+    with node.handle:
+        probe = _rclpy.Subscription(node.handle, msg_type, topic, qos_profile.get_c_qos_profile())
+    try:
+        with probe:
+            _apply(probe.pointer, topic, never_match_on(field), ())
+            _apply(probe.pointer, topic, expression, expression_parameters)
+    finally:
+        probe.destroy_when_not_in_use()
+
+
+def create_filtered_subscription(
+    node: Node,
+    msg_type,
+    topic: str,
+    callback: Callable,
+    qos_profile: Union[QoSProfile, int],
+    filter_expression: str,
+    expression_parameters: Sequence[Literal] = (),
+    *,
+    callback_group: Optional[CallbackGroup] = None,
+    event_callbacks: Optional[SubscriptionEventCallbacks] = None,
+    qos_overriding_options: Optional[QoSOverridingOptions] = None,
+    raw: bool = False,
+) -> Subscription:
+    """
+    Create a subscription whose messages are filtered by the middleware.
+
+    Takes the arguments of :meth:`rclpy.node.Node.create_subscription`, plus the filter. The filter
+    is installed before the subscription is added to the node, so no executor ever waits on it
+    unfiltered and no sample arrives that does not match.
+
+    Fast DDS counts samples that the writer filtered out as *lost*: a ``message_lost`` callback in
+    ``event_callbacks`` would report them as false alarms, so passing one logs a warning.
+
+    :param node: The node to create the subscription on.
+    :param msg_type: The type of ROS messages the subscription will subscribe to.
+    :param topic: The name of the topic the subscription will subscribe to.
+    :param callback: A user-defined callback function that is called when a message is
+        received by the subscription.
+    :param qos_profile: A QoSProfile or a history depth to apply to the subscription.
+    :param filter_expression: A DDS-SQL expression over the message fields, for example
+        ``"data > %0"``. Array members must be indexed: ``"goal_id.uuid[0] = 7"``.
+    :param expression_parameters: Values for ``%0`` .. ``%99``. Python values and bare strings are
+        turned into DDS literals by :func:`cft_action.filters.dds_literal`: ``hello`` is sent as
+        ``'hello'``.
+    :param callback_group: The callback group for the subscription. If ``None``, then the
+        default callback group for the node is used.
+    :param event_callbacks: User-defined callbacks for middleware events.
+    :param qos_overriding_options: Options to allow overriding QoS parameters.
+    :param raw: If ``True``, then received messages will be stored in raw binary
+        representation.
+    :return: An ordinary :class:`rclpy.subscription.Subscription`.
+    :raises ContentFilterError: if the filter cannot be applied; the message names the expression
+        and carries rcl's error string. No subscription is left behind.
+    """
+    if not filter_expression:
+        raise ContentFilterError('a filtered subscription needs a non-empty filter_expression; '
+                                 'use Node.create_subscription for an unfiltered one')
+    # What follows mirrors Node.create_subscription, with the filter set between the creation of
+    # the rcl subscription and its registration with the node.
+    qos_profile = node._validate_qos_or_depth_parameter(qos_profile)
+    callback_group = callback_group or node.default_callback_group
+    try:
+        final_topic = node.resolve_topic_name(topic)
+    except RuntimeError:
+        try:
+            node._validate_topic_or_service_name(topic)
+        except InvalidTopicNameException as ex:
+            raise ex from None
+        raise
+    _declare_qos_parameters(Subscription, node, final_topic, qos_profile,
+                            qos_overriding_options or QoSOverridingOptions([]))
+    check_is_valid_msg_type(msg_type)
+    _validate_on_probe(node, msg_type, qos_profile, filter_expression, expression_parameters)
+    with node.handle:
+        subscription_object = _rclpy.Subscription(
+            node.handle, msg_type, topic, qos_profile.get_c_qos_profile())
+    try:
+        with subscription_object:
+            _apply(subscription_object.pointer, final_topic, filter_expression,
+                   expression_parameters)
+        subscription = Subscription(
+            subscription_object, msg_type, topic, callback, callback_group, qos_profile, raw,
+            event_callbacks=event_callbacks or SubscriptionEventCallbacks())
+    except Exception:
+        subscription_object.destroy_when_not_in_use()
+        raise
+    if event_callbacks is not None and event_callbacks.message_lost is not None:
+        _warn_message_lost(node)
+    callback_group.add_entity(subscription)
+    node._subscriptions.append(subscription)
+    node._wake_executor()
+    for event_handler in subscription.event_handlers:
+        node.add_waitable(event_handler)
+    return subscription
+
+
+def _warn_message_lost(node: Node) -> None:
+    global _message_lost_warned
+    if not _message_lost_warned:
+        _message_lost_warned = True
+        node.get_logger().warning(
+            'message_lost callback on a content-filtered subscription: Fast DDS counts the '
+            'samples that the writer filtered out as lost, so this callback reports false alarms')
+
+
+def set_content_filter(subscription: Subscription, filter_expression: str,
+                       expression_parameters: Sequence[Literal] = ()) -> None:
+    """
+    Change the filter of a subscription made by :func:`create_filtered_subscription`.
+
+    The change is made in place, so it is safe while an executor spins the subscription. It travels
+    to the publishers by discovery; until it arrives they apply the previous filter.
+
+    :param subscription: A filtered subscription.
+    :param filter_expression: The new, non-empty DDS-SQL expression.
+    :param expression_parameters: Values for ``%0`` .. ``%99``, quoted as DDS literals as needed.
+    :raises ContentFilterError: if the expression is empty, if the subscription has no filter yet
+        (rmw_fastrtps would recreate its reader under a waiting executor), or if rcl rejects it;
+        the subscription then keeps its previous filter.
+    """
+    if not filter_expression:
+        raise ContentFilterError(
+            'refusing to set an empty filter expression: rmw_fastrtps would destroy and recreate '
+            'the DataReader, which is a use-after-free under a waiting executor. To receive '
+            'nothing, use cft_action.filters.NEVER_MATCH; to receive everything, create an '
+            'unfiltered subscription')
+    with subscription.handle:
+        pointer = subscription.handle.pointer
+        if not _rcl.is_cft_enabled(pointer):
+            raise ContentFilterError(
+                f'{subscription.topic_name} has no content filter yet; installing a first one '
+                'recreates the DataReader, so create it with create_filtered_subscription')
+        _apply(pointer, subscription.topic_name, filter_expression, expression_parameters)
+
+
+def get_content_filter(subscription: Subscription) -> ContentFilterOptions:
+    """Return the subscription's filter as ``(filter_expression, expression_parameters)``.
+
+    :raises ContentFilterError: if the rmw has no content filtering, or rcl fails.
+    """
+    with subscription.handle:
+        with _rcl_lock:
+            expression, parameters = _rcl.get_content_filter(subscription.handle.pointer)
+    return ContentFilterOptions(expression, parameters)
+
+
+def is_filtered(subscription: Subscription) -> bool:
+    """Return whether the middleware applies a content filter to ``subscription``."""
+    with subscription.handle:
+        return _rcl.is_cft_enabled(subscription.handle.pointer)

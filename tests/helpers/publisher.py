@@ -1,0 +1,61 @@
+"""Publishes int, float and string samples on command; used by the filtered-subscription tests.
+
+Usage: publisher.py PREFIX [DEPTH]: reliable, keep-last DEPTH (default 1000). Commands on stdin, one per line:
+  wait T N   wait until topic T (ints, floats or strings) has exactly N matched subscriptions;
+             replies MATCHED or TIMEOUT
+  burst N [PERIOD]
+             publish samples 0..N-1 on every topic, PERIOD seconds apart; replies SENT N
+"""
+
+import sys
+import time
+
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Float64, Int32, String
+
+WORDS = ('hello', 'world', 'hello world')
+
+
+def main() -> None:
+    prefix = sys.argv[1]
+    depth = int(sys.argv[2]) if len(sys.argv) > 2 else 1000
+    qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+    rclpy.init()
+    node = Node('cft_test_publisher')
+    publishers = {
+        'ints': (node.create_publisher(Int32, f'{prefix}/ints', qos), lambda i: Int32(data=i)),
+        'floats': (node.create_publisher(Float64, f'{prefix}/floats', qos),
+                   lambda i: Float64(data=i * 0.5)),
+        'strings': (node.create_publisher(String, f'{prefix}/strings', qos),
+                    lambda i: String(data=WORDS[i % len(WORDS)])),
+    }
+    print('READY', flush=True)
+    for line in sys.stdin:
+        command, _, argument = line.strip().partition(' ')
+        if command == 'wait':
+            topic, count = argument.split()
+            publisher = publishers[topic][0]
+            deadline = time.monotonic() + 20
+            while publisher.get_subscription_count() != int(count):
+                if time.monotonic() > deadline:
+                    print('TIMEOUT', flush=True)
+                    break
+                time.sleep(0.05)
+            else:
+                print('MATCHED', flush=True)
+        elif command == 'burst':
+            count, _, period = argument.partition(' ')
+            for i in range(int(count)):
+                for publisher, make in publishers.values():
+                    publisher.publish(make(i))
+                if period:
+                    time.sleep(float(period))
+            print(f'SENT {count}', flush=True)
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+if __name__ == '__main__':
+    main()
