@@ -1,0 +1,139 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""The server guard: an ``LD_PRELOAD`` shim that makes Fast DDS writer-side filtering race-free.
+
+With Fast DDS 2.14 (Jazzy) and 3.2 (Kilted), a content filter that a *client* changes, or a
+filtered reader that goes away, can crash the process that owns the writer (the action server):
+the discovery thread replaces the writer's per-reader filters without the writer's lock while a
+publish evaluates them (eProsima/Fast-DDS issue 4878). No client-side setting prevents it.
+
+The guard is a small C library, built with this package (``cft_action/_guard.c``). Preloaded into
+the **server** process, it serializes each writer's publish path with the discovery path that
+changes that writer's filters. The server's code does not change::
+
+    cft-action guard -- python my_action_server.py
+
+or, from Python, ``subprocess.Popen(cmd, env=cft_action.guard.environment())``.
+
+It only locks on a Fast DDS it knows (``libfastrtps.so.2.14``, ``libfastdds.so.3.2``). On any other
+version it calls straight through and prints one line on stderr saying that it is inactive and why.
+Set ``CFT_GUARD_DEBUG=1`` to see what it does.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import importlib.machinery
+import importlib.util
+import os
+import re
+from pathlib import Path
+from typing import Mapping, Optional
+
+__all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts', 'environment']
+
+#: Name of the extension module that setup.py builds from ``_guard.c``.
+_MODULE = '_cftguard'
+
+# State codes of cft_guard_state() in _guard.c.
+_ARMED, _ACTIVE, _INACTIVE = 0, 1, 2
+
+
+class GuardUnavailable(RuntimeError):
+    """The guard library was not built, or its path cannot be put into ``LD_PRELOAD``."""
+
+
+def library_path() -> str:
+    """Return the absolute path of the built guard library (the file to ``LD_PRELOAD``).
+
+    :raises GuardUnavailable: when the package was installed without building it.
+    """
+    here = Path(__file__).resolve().parent
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        candidate = here / f'{_MODULE}{suffix}'
+        if candidate.is_file():
+            return str(candidate)
+    # An install layout that keeps extension modules elsewhere: ask the import system where the
+    # module is, without importing it (it is not a Python module, only a shared library).
+    spec = importlib.util.find_spec(f'{__package__ or "cft_action"}.{_MODULE}')
+    if spec is not None and spec.origin and os.path.isfile(spec.origin):
+        return os.path.abspath(spec.origin)
+    raise GuardUnavailable(
+        f'the guard library ({_MODULE}*.so) was not found next to {__file__}; '
+        'reinstall cft-action with a C compiler available (pip install .)')
+
+
+def _preloaded() -> Optional[ctypes.CDLL]:
+    """Return a handle to this process's global scope if the guard's C API is visible in it."""
+    try:
+        process = ctypes.CDLL(None)
+        process.cft_guard_state  # noqa: B018  (lookup only)
+    except (OSError, AttributeError):
+        return None
+    process.cft_guard_state.argtypes = []
+    process.cft_guard_state.restype = ctypes.c_int
+    process.cft_guard_reason.argtypes = []
+    process.cft_guard_reason.restype = ctypes.c_char_p
+    process.cft_guard_call_count.argtypes = [ctypes.c_int]
+    process.cft_guard_call_count.restype = ctypes.c_ulong
+    return process
+
+
+def is_active() -> bool:
+    """Return True when this process has the guard preloaded and it is protecting Fast DDS.
+
+    True while the guard waits for Fast DDS to load (before the first node is created) and once it
+    interposes a Fast DDS version it knows. False when the guard is not preloaded, when the loaded
+    Fast DDS is a version it does not know (it then calls straight through), or when it was loaded
+    after Fast DDS; :func:`status` says which.
+    """
+    process = _preloaded()
+    return process is not None and process.cft_guard_state() != _INACTIVE
+
+
+def status() -> str:
+    """Return one line describing the guard in this process.
+
+    For example ``'active: libfastrtps.so.2.14 (/path/libfastrtps.so.2.14)'``.
+
+    Starts with ``'active'``, ``'armed'`` (preloaded, no Fast DDS loaded yet), ``'inactive'`` or
+    ``'not preloaded'``.
+    """
+    process = _preloaded()
+    if process is None:
+        return 'not preloaded: cft_guard_state is not in the global symbol scope'
+    return process.cft_guard_reason().decode('utf-8', 'replace')
+
+
+def call_counts() -> dict[str, int]:
+    """Return how often the guard's interposed Fast DDS members ran in this process.
+
+    Keys: ``perform_create_new_change``, ``process_reader_filter_info``, ``remove_reader_filter``
+    and ``nested_unlocked`` (nested writes that went on without their lock to avoid a deadlock).
+    An empty dict when the guard is not preloaded.
+    """
+    process = _preloaded()
+    if process is None:
+        return {}
+    names = ('perform_create_new_change', 'process_reader_filter_info', 'remove_reader_filter',
+             'nested_unlocked')
+    return {name: int(process.cft_guard_call_count(i)) for i, name in enumerate(names)}
+
+
+def environment(env: Optional[Mapping[str, str]] = None) -> dict[str, str]:
+    """Return a copy of ``env`` (default: ``os.environ``) with the guard first in ``LD_PRELOAD``.
+
+    Entries already in ``LD_PRELOAD`` are kept after it; the guard is not added twice. Pass the
+    result as ``env=`` to :class:`subprocess.Popen` for the process that runs the action server.
+
+    :raises GuardUnavailable: when the library is missing, or its path contains a character that
+        ``LD_PRELOAD`` cannot carry (a space or a colon).
+    """
+    result = dict(os.environ if env is None else env)
+    path = library_path()
+    if re.search(r'[\s:]', path):
+        raise GuardUnavailable(f'LD_PRELOAD cannot carry a path with spaces or colons: {path!r}')
+    # ld.so splits LD_PRELOAD on spaces and colons.
+    others = [entry for entry in re.split(r'[\s:]+', result.get('LD_PRELOAD', ''))
+              if entry and os.path.realpath(entry) != os.path.realpath(path)]
+    result['LD_PRELOAD'] = ':'.join([path, *others])
+    return result

@@ -1,0 +1,403 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""Tests of the server guard: cft_action/_guard.c, cft_action.guard and ``cft-action guard``.
+
+Three layers:
+- the library and the command line (path, acceptance command, environment);
+- the C logic against a stand-in Fast DDS built here (tests/helpers/guard_fake_fastdds.c): locking
+  on the known version, calling straight through on an unknown one, late loading;
+- the real stack: an rclpy publisher under the guard, and the churn scenario of Fast-DDS issue 4878
+  (a server publishing feedback every 0.5 ms while a client changes its filter every 20 ms).
+
+Every process a test starts runs in its own process and is killed by that test; every wait is
+bounded.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import random
+import re
+import shutil
+import signal
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Iterator, Optional
+
+import pytest
+
+# A session conftest normally sets these; on its own this module still gets a domain of its own.
+os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 101)))
+os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+
+from cft_action import guard  # noqa: E402
+
+HELPERS = Path(__file__).resolve().parent / 'helpers'
+SCENARIO = HELPERS / 'guard_scenario.py'
+GUARD_LINE = '[cft_action guard'
+# What a guarded rclpy process reports: active on a known Fast DDS (2.14 on Jazzy, 3.2 on Kilted).
+KNOWN_ACTIVE = ('STATUS True active: libfastrtps.so.2.14', 'STATUS True active: libfastdds.so.3.2')
+
+
+def cft_action_command() -> list[str]:
+    """The installed console script next to this interpreter, else the module."""
+    script = Path(sys.executable).parent / 'cft-action'
+    if script.is_file():
+        return [str(script)]
+    return [sys.executable, '-m', 'cft_action.cli']
+
+
+def plain_env(**extra: str) -> dict[str, str]:
+    """os.environ without the guard (and without CFT_GUARD_DEBUG), plus ``extra``."""
+    env = dict(os.environ)
+    path = guard.library_path()
+    kept = [e for e in re.split(r'[\s:]+', env.get('LD_PRELOAD', '')) if e and e != path]
+    if kept:
+        env['LD_PRELOAD'] = ':'.join(kept)
+    else:
+        env.pop('LD_PRELOAD', None)
+    env.pop('CFT_GUARD_DEBUG', None)
+    env['PYTHONUNBUFFERED'] = '1'
+    env.update(extra)
+    return env
+
+
+class Proc:
+    """A child process whose merged stdout/stderr is read line by line by a thread."""
+
+    def __init__(self, name: str, args: list[str], env: dict[str, str]) -> None:
+        self.name = name
+        self.lines: list[str] = []
+        self._closed = False
+        self._changed = threading.Condition()
+        self.popen = subprocess.Popen(args, env=env, stdout=subprocess.PIPE,
+                                      stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL,
+                                      text=True, errors='replace')
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.popen.stdout is not None
+        for line in self.popen.stdout:
+            with self._changed:
+                self.lines.append(line.rstrip('\n'))
+                self._changed.notify_all()
+        with self._changed:
+            self._closed = True
+            self._changed.notify_all()
+
+    def wait_for(self, prefix: str, timeout: float, after: int = 0) -> Optional[str]:
+        """Return the first line from index ``after`` on that starts with ``prefix``, or None.
+
+        Waits at most ``timeout`` seconds, and not past the end of the process's output.
+        """
+        deadline = time.monotonic() + timeout
+        index = after
+        with self._changed:
+            while True:
+                while index < len(self.lines):
+                    if self.lines[index].startswith(prefix):
+                        return self.lines[index]
+                    index += 1
+                remaining = deadline - time.monotonic()
+                if self._closed or remaining <= 0:
+                    return None
+                self._changed.wait(remaining)
+
+    def last(self, prefix: str) -> Optional[str]:
+        return next((line for line in reversed(self.lines) if line.startswith(prefix)), None)
+
+    def wait(self, timeout: float) -> Optional[int]:
+        try:
+            return self.popen.wait(timeout=timeout)
+        except subprocess.TimeoutExpired:
+            return None
+
+    def stop(self) -> Optional[int]:
+        """End the process (SIGINT, then SIGTERM, then SIGKILL) and return its exit status."""
+        steps = ((lambda: self.popen.send_signal(signal.SIGINT), 3.0),
+                 (self.popen.terminate, 3.0), (self.popen.kill, 10.0))
+        for action, grace in steps:
+            if self.popen.poll() is not None:
+                break
+            try:
+                action()
+            except ProcessLookupError:
+                break
+            self.wait(grace)
+        self._reader.join(5.0)
+        return self.popen.poll()
+
+    def output(self) -> str:
+        return f'--- {self.name} (rc={self.popen.poll()}) ---\n' + '\n'.join(self.lines[-40:])
+
+
+@pytest.fixture
+def procs() -> Iterator[list[Proc]]:
+    """Processes started by a test; all of them are stopped when it ends, pass or fail."""
+    started: list[Proc] = []
+    yield started
+    for proc in started:
+        proc.stop()
+
+
+def start(procs: list[Proc], name: str, args: list[str], env: dict[str, str]) -> Proc:
+    proc = Proc(name, args, env)
+    procs.append(proc)
+    return proc
+
+
+def run(args: list[str], env: dict[str, str], timeout: float = 60.0) -> subprocess.CompletedProcess:
+    return subprocess.run(args, env=env, capture_output=True, text=True, timeout=timeout,
+                          stdin=subprocess.DEVNULL)
+
+
+# --- the library and the command line -------------------------------------------------------------
+
+def test_print_path_gives_the_built_library() -> None:
+    result = run([*cft_action_command(), 'guard', '--print-path'], plain_env())
+    assert result.returncode == 0, result.stderr
+    path = result.stdout.strip()
+    assert os.path.isfile(path), path
+    assert os.path.samefile(path, guard.library_path())
+    assert Path(path).parent == Path(guard.__file__).resolve().parent
+
+
+def test_acceptance_is_active_only_under_the_guard() -> None:
+    code = 'import cft_action.guard as g; print(g.is_active())'
+    guarded = run([*cft_action_command(), 'guard', '--', sys.executable, '-c', code], plain_env())
+    assert guarded.returncode == 0, guarded.stderr
+    assert guarded.stdout.strip() == 'True', guarded.stdout + guarded.stderr
+    assert GUARD_LINE not in guarded.stderr  # silent in the normal case
+
+    unguarded = run([sys.executable, '-c', code], plain_env())
+    assert unguarded.returncode == 0, unguarded.stderr
+    assert unguarded.stdout.strip() == 'False', unguarded.stdout + unguarded.stderr
+
+
+def test_environment_prepends_the_guard_once() -> None:
+    path = guard.library_path()
+    env = guard.environment({'LD_PRELOAD': '/opt/a.so /opt/b.so', 'X': '1'})
+    assert env['LD_PRELOAD'] == f'{path}:/opt/a.so:/opt/b.so'
+    assert env['X'] == '1'
+    assert guard.environment(env)['LD_PRELOAD'] == env['LD_PRELOAD']
+    assert guard.environment({})['LD_PRELOAD'] == path
+
+
+def test_cli_errors() -> None:
+    no_command = run([*cft_action_command(), 'guard'], plain_env())
+    assert no_command.returncode == 2
+    assert 'command' in no_command.stderr
+    missing = run([*cft_action_command(), 'guard', '--', 'no-such-command-' + uuid.uuid4().hex],
+                  plain_env())
+    assert missing.returncode == 127
+    assert 'command not found' in missing.stderr
+
+
+def test_guard_passes_arguments_and_status_through() -> None:
+    result = run([*cft_action_command(), 'guard', '--', sys.executable, '-c',
+                  'import os, sys; print(os.environ["LD_PRELOAD"].split(":")[0]); '
+                  'print(sys.argv[1:]); sys.exit(3)', '--print-path', 'x y'], plain_env())
+    assert result.returncode == 3, result.stderr
+    first, argv = result.stdout.splitlines()
+    assert first == guard.library_path()
+    assert argv == "['--print-path', 'x y']"
+
+
+# --- the C logic against a stand-in Fast DDS ------------------------------------------------------
+
+@pytest.fixture(scope='module')
+def fake_fastdds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
+    """Build the stand-in library twice: as the known soname, and as an unknown one."""
+    compiler = shutil.which('cc') or shutil.which('gcc')
+    if compiler is None:
+        pytest.skip('no C compiler to build the stand-in Fast DDS')
+    out = tmp_path_factory.mktemp('fake_fastdds')
+    built = {}
+    for key, soname in (('known', 'libfastrtps.so.2.14'), ('unknown', 'libfastrtps.so.2.13')):
+        (out / key).mkdir()
+        target = out / key / soname
+        subprocess.run([compiler, '-O2', '-shared', '-fPIC', f'-Wl,-soname,{soname}', '-o',
+                        str(target), str(HELPERS / 'guard_fake_fastdds.c')],
+                       check=True, timeout=120, capture_output=True)
+        built[key] = str(target)
+    main_c = out / 'linked_main.c'
+    main_c.write_text(
+        '#include <dlfcn.h>\n#include <stdio.h>\n'
+        'int fake_write(void *w, int kind);\n'
+        'int main(void) {\n'
+        '  int r = fake_write((void *)0x1000, 2);\n'
+        '  int (*state)(void) = (int (*)(void))dlsym(RTLD_DEFAULT, "cft_guard_state");\n'
+        '  printf("%d %d\\n", r, state ? state() : -1);\n'
+        '  return 0;\n}\n')
+    built['linked_main'] = str(out / 'linked_main')
+    subprocess.run([compiler, '-o', built['linked_main'], str(main_c), built['known'],
+                    '-ldl'],
+                   check=True, timeout=120, capture_output=True)
+    return built
+
+
+def drive_fake(library: str, env: dict[str, str], *extra: str) -> tuple[dict, str]:
+    result = run([sys.executable, str(HELPERS / 'guard_fake_driver.py'), library, '0.4', *extra],
+                 env, timeout=60)
+    assert result.returncode == 0, result.stdout + result.stderr
+    return json.loads(result.stdout.strip().splitlines()[-1]), result.stderr
+
+
+def test_fake_race_is_visible_without_the_guard(fake_fastdds: dict[str, str]) -> None:
+    # The control: the stand-in does detect writes that overlap filter changes.
+    report, _ = drive_fake(fake_fastdds['known'], plain_env())
+    assert 'state' not in report
+    assert report['writes'] > 0 and report['changes'] > 0
+    assert report['overlaps'] > 0, report
+
+
+def test_guard_serializes_writes_with_filter_changes(fake_fastdds: dict[str, str]) -> None:
+    report, stderr = drive_fake(fake_fastdds['known'], guard.environment(plain_env()))
+    assert report['state'] == 1 and report['active'] == 1, report
+    assert report['reason'].startswith('active: libfastrtps.so.2.14'), report
+    assert report['writes'] > 0 and report['changes'] > 0, report
+    assert report['overlaps'] == 0, report
+    assert report['wrong_returns'] == 0, report
+    writes, infos, removals, _ = report['calls']
+    assert writes == report['writes'] and infos + removals == report['changes'], report
+    assert GUARD_LINE not in stderr  # nothing printed in the normal case
+
+
+def test_guard_debug_output(fake_fastdds: dict[str, str]) -> None:
+    report, stderr = drive_fake(fake_fastdds['known'],
+                                guard.environment(plain_env(CFT_GUARD_DEBUG='1')))
+    assert report['state'] == 1, report
+    assert f'{GUARD_LINE}' in stderr and 'active: libfastrtps.so.2.14' in stderr, stderr
+
+
+def test_unknown_version_calls_through_and_says_so_once(fake_fastdds: dict[str, str]) -> None:
+    report, stderr = drive_fake(fake_fastdds['unknown'], guard.environment(plain_env()))
+    assert report['state'] == 2 and report['active'] == 0, report
+    assert report['wrong_returns'] == 0 and report['writes'] > 0, report
+    assert report['calls'][0] == report['writes'], report  # interposed, and called through
+    lines = [line for line in stderr.splitlines() if line.startswith(GUARD_LINE)]
+    assert len(lines) == 1, stderr
+    assert 'inactive' in lines[0] and 'libfastrtps.so.2.13' in lines[0], lines[0]
+    assert 'not a Fast DDS version this guard knows' in lines[0], lines[0]
+
+
+def test_guard_loaded_after_fastdds_reports_inactive(fake_fastdds: dict[str, str]) -> None:
+    report, stderr = drive_fake(fake_fastdds['known'], plain_env(), '--load-guard-late',
+                                guard.library_path())
+    assert report['state'] == 2 and report['active'] == 0, report
+    assert 'loaded after Fast DDS' in report['reason'], report
+    assert report['wrong_returns'] == 0, report
+
+
+def test_guard_with_fastdds_linked_into_the_executable(fake_fastdds: dict[str, str]) -> None:
+    # A DT_NEEDED Fast DDS is mapped after LD_PRELOAD: that is the normal, active case.
+    # Its own directory first, so that the loader does not pick the real libfastrtps.so.2.14.
+    env = guard.environment(plain_env(LD_LIBRARY_PATH=str(Path(fake_fastdds['known']).parent)))
+    result = run([fake_fastdds['linked_main']], env)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ['42', '1'], result.stdout + result.stderr
+
+
+# --- the real stack -------------------------------------------------------------------------------
+
+def scenario_env(guarded: bool, name: str) -> dict[str, str]:
+    env = plain_env(GUARD_ACTION=f'guard_fib_{name}', GUARD_TOPIC=f'guard_chatter_{name}')
+    return guard.environment(env) if guarded else env
+
+
+def test_rclpy_publisher_runs_normally_under_the_guard(procs: list[Proc]) -> None:
+    name = uuid.uuid4().hex[:8]
+    listener = start(procs, 'listener', [sys.executable, str(SCENARIO), 'listener', '10', '20'],
+                     scenario_env(False, name))
+    assert listener.wait_for('READY', 30.0), listener.output()
+    talker = start(procs, 'talker', [sys.executable, str(SCENARIO), 'talker', '40'],
+                   scenario_env(True, name))
+    assert talker.wait(40.0) == 0, talker.output()
+    status = talker.last('STATUS')
+    assert status is not None and status.startswith(KNOWN_ACTIVE), talker.output()
+    calls = dict(kv.split('=') for kv in (talker.last('CALLS') or 'CALLS').split()[1:])
+    assert int(calls.get('perform_create_new_change', 0)) >= 40, talker.output()
+    assert not any(line.startswith(GUARD_LINE) for line in talker.lines), talker.output()
+    received = listener.wait_for('RECEIVED', 30.0)
+    assert received is not None and int(received.split()[1]) >= 10, listener.output()
+
+
+CHURN_UPDATES = 300
+CHURN_INTERVAL = 0.02
+FEEDBACK_PERIOD = 0.0005
+
+
+def churn_scenario(procs: list[Proc], guarded: bool) -> dict:
+    """Server (guarded or not), a goal that keeps it publishing, and a churning client.
+
+    Returns what happened; asserts nothing, so that the unguarded run is evidence only.
+    """
+    name = uuid.uuid4().hex[:8]
+    outcome: dict = {'guarded': guarded}
+    server = start(procs, 'server', [sys.executable, str(SCENARIO), 'server',
+                                     str(FEEDBACK_PERIOD), '40'], scenario_env(guarded, name))
+    outcome['server'] = server
+    outcome['status'] = server.wait_for('STATUS', 30.0)
+    if server.wait_for('READY', 30.0) is None:
+        outcome['error'] = 'server not ready'
+        return outcome
+    goal = start(procs, 'goal', [sys.executable, str(SCENARIO), 'goal', '45'],
+                 scenario_env(False, name))
+    outcome['goal'] = goal
+    if goal.wait_for('FEEDBACK', 30.0) is None:
+        outcome['error'] = 'no feedback reached the goal client'
+        return outcome
+    churn = start(procs, 'churn', [sys.executable, str(SCENARIO), 'churn', str(CHURN_UPDATES),
+                                   str(CHURN_INTERVAL), str(server.popen.pid)],
+                  scenario_env(False, name))
+    outcome['churn'] = churn
+    result = churn.wait_for('RESULT', 45.0)
+    outcome['result'] = result
+    if result is None:
+        outcome['error'] = 'the churn client gave no result in time'
+        return outcome
+    words = result.split()
+    outcome['survived'] = words[1] == 'survived'
+    outcome['updates'] = int(words[2])
+    outcome['server_rc'] = server.popen.poll()
+    if outcome['server_rc'] is None:  # still alive: read its counters once more
+        outcome['calls'] = server.wait_for('CALLS', 5.0, after=len(server.lines))
+    return outcome
+
+
+def test_churn_server_survives_with_the_guard(procs: list[Proc]) -> None:
+    outcome = churn_scenario(procs, guarded=True)
+    dump = '\n'.join(p.output() for p in procs)
+    assert 'error' not in outcome, outcome.get('error', '') + '\n' + dump
+    assert outcome['status'] and outcome['status'].startswith(KNOWN_ACTIVE), dump
+    assert outcome['survived'] and outcome['updates'] == CHURN_UPDATES, dump
+    assert outcome['server_rc'] is None, dump
+    # The writer really went through the guard for both paths.
+    assert outcome['calls'], dump
+    calls = dict(kv.split('=') for kv in outcome['calls'].split()[1:])
+    assert int(calls['perform_create_new_change']) > 1000, outcome['calls']
+    assert int(calls['process_reader_filter_info']) > 0, outcome['calls']
+    assert not any(line.startswith(GUARD_LINE) for line in outcome['server'].lines), dump
+
+
+def test_churn_without_the_guard_is_evidence_only(
+        procs: list[Proc], capsys: pytest.CaptureFixture[str]) -> None:
+    # Evidence, not a check: the same scenario with an unguarded server.
+    # It never asserts and never retries.
+    outcome = churn_scenario(procs, guarded=False)
+    if 'error' in outcome:
+        message = f'unguarded churn: inconclusive ({outcome["error"]})'
+    elif outcome['survived']:
+        message = f'unguarded churn: server survived {outcome["updates"]} filter updates'
+    else:
+        server = outcome['server']
+        server.wait(5.0)
+        message = (f'unguarded churn: server died after {outcome["updates"]} filter updates '
+                   f'(exit status {server.popen.poll()}; {outcome["result"]})')
+    with capsys.disabled():
+        print(f'\n[evidence] {message}')
