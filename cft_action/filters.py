@@ -19,6 +19,9 @@ GOAL_UUID_FIELD = 'goal_id.uuid'
 #: to ``""``, so an empty set of goals is expressed with this instead.
 NEVER_MATCH = f'{GOAL_UUID_FIELD}[0] = 0 AND {GOAL_UUID_FIELD}[0] = 1'
 
+#: An expression that every feedback sample matches: an in-place way back to receiving everything.
+MATCH_ALL = f'{GOAL_UUID_FIELD}[0] = {GOAL_UUID_FIELD}[0]'
+
 _QUOTES = ("'", '`')
 _NUMBER = re.compile(r'[+-]?(0[xX][0-9a-fA-F]+|(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?)')
 _BOOLEANS = ('TRUE', 'FALSE')

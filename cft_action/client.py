@@ -1,0 +1,352 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""A drop-in :class:`rclpy.action.ActionClient` whose feedback subscription is content-filtered.
+
+An action server publishes the feedback of all goals on one topic, so a plain client receives,
+deserializes and drops the feedback of every other client's goals. This client asks the server's
+DataWriter, by a DDS content filter on ``goal_id.uuid``, to send it only its own goals' feedback.
+rclpy's own UUID check still guards every callback, in every mode.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from typing import Any, Callable, NamedTuple, Optional
+
+from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient as _RclpyActionClient
+from rclpy.node import Node
+from rclpy.task import Future
+from unique_identifier_msgs.msg import UUID
+
+from cft_action import _rcl
+from cft_action.filters import MATCH_ALL
+from cft_action.goal_filter import ExpressionTooLong, GoalFilterPlan, MODES, random_uuid4
+from cft_action.subscription import is_content_filter_supported
+
+__all__ = ['ActionClient', 'FeedbackFilterState', 'FEEDBACK_FILTER_ENV']
+
+#: Environment variable with which operators override the ``feedback_filter`` argument.
+FEEDBACK_FILTER_ENV = 'CFT_ACTION_FEEDBACK_FILTER'
+
+_TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
+                       GoalStatus.STATUS_ABORTED})
+
+#: Seconds a finished goal keeps its callback and filter term: feedback and status travel on
+#: different topics, so the last feedback may arrive after the terminal status.
+FINISHED_GOAL_GRACE = 1.0
+
+
+class FeedbackFilterState(NamedTuple):
+    """A snapshot of an :class:`ActionClient`'s feedback filter.
+
+    :ivar mode: ``'client'``, ``'goals'`` or ``'off'``.
+    :ivar active: whether the middleware filters the feedback subscription.
+    :ivar reason: why the filter is not active; empty when it is.
+    :ivar expression: the filter expression in force; empty when not active.
+    :ivar updates: filter changes sent after the first installation; each is an event at the
+        server's writer.
+    :ivar live_goals: goals that hold an exact term in the expression.
+    :ivar feedback_taken: feedback messages taken from rcl by this client.
+    :ivar feedback_dropped: of those, messages for which this client had no feedback callback.
+    """
+
+    mode: str
+    active: bool
+    reason: str
+    expression: str
+    updates: int
+    live_goals: int
+    feedback_taken: int
+    feedback_dropped: int
+
+
+def _resolve_mode(feedback_filter: Optional[str]) -> str:
+    from_env = os.environ.get(FEEDBACK_FILTER_ENV)
+    mode = from_env or feedback_filter or 'client'
+    if mode not in MODES:
+        source = f'environment variable {FEEDBACK_FILTER_ENV}' if from_env else 'feedback_filter'
+        raise ValueError(f'{source}={mode!r}: expected one of {", ".join(MODES)}')
+    return mode
+
+
+class ActionClient(_RclpyActionClient):
+    """ROS Action client whose feedback subscription receives only its own goals' feedback."""
+
+    def __init__(self, node: Node, action_type: Any, action_name: str, *,
+                 feedback_filter: Optional[str] = None, **kwargs: Any) -> None:
+        """
+        Create an ActionClient.
+
+        Takes every argument of :class:`rclpy.action.ActionClient`, plus ``feedback_filter``.
+
+        :param node: The ROS node to add the action client to.
+        :param action_type: Type of the action.
+        :param action_name: Name of the action.
+            Used as part of the underlying topic and service names.
+        :param feedback_filter: How the feedback subscription is filtered:
+
+            - ``'client'`` (default): on a random tag that starts the UUID of every goal this client
+              sends with a feedback callback. The filter never changes after construction.
+            - ``'goals'``: on the exact UUIDs of the live goals that have a feedback callback. The
+              filter changes as goals come and go, which costs filter updates at the server.
+            - ``'off'``: no filter, as plain rclpy.
+
+            The environment variable ``CFT_ACTION_FEEDBACK_FILTER`` overrides it. Where the filter
+            cannot be used, the client falls back to plain behaviour, logs why once, and reports
+            it in :attr:`feedback_filter_state`.
+        :param kwargs: ``callback_group``, ``goal_service_qos_profile``,
+            ``result_service_qos_profile``, ``cancel_service_qos_profile``,
+            ``feedback_sub_qos_profile`` and ``status_sub_qos_profile``, as for rclpy.
+        :raises ValueError: if ``feedback_filter`` or the environment variable names no mode.
+        """
+        mode = _resolve_mode(feedback_filter)
+        self._cft_logger = node.get_logger().get_child('cft_action')
+        self._filter_lock = threading.RLock()
+        self._plan: Optional[GoalFilterPlan] = None
+        self._feedback_ptr: Optional[int] = None
+        self._state = FeedbackFilterState(mode, False, '', '', 0, 0, 0, 0)
+        self._installed = False
+        self._finished: dict[bytes, float] = {}  # goal UUID -> when it finished
+        self._last_activity = time.monotonic()
+        self._logged_explicit_uuid = False
+        self._feedback_taken = 0
+        self._feedback_dropped = 0
+        self._install_before_first_wait(node, action_type, action_name, kwargs)
+        self._release_timer = node.create_timer(
+            FINISHED_GOAL_GRACE, self._release_finished_goals, callback_group=self.callback_group)
+        self._release_timer.cancel()
+
+    # --- installation ------------------------------------------------------------------------------
+
+    def _install_before_first_wait(self, node: Node, action_type: Any, action_name: str,
+                                   kwargs: dict) -> None:
+        """Run rclpy's constructor, installing the filter just before the node publishes us.
+
+        rmw_fastrtps recreates the DataReader when a first filter is set, which must not happen
+        while an executor waits on it, nor after a goal was sent, or queued feedback would be lost.
+        Node.add_waitable is where an executor can first see this client, so the filter goes in
+        there, after rclpy has created the rcl action client.
+        """
+        shadowed = node.__dict__.get('add_waitable')
+        add_waitable = node.add_waitable
+
+        def install_then_add(waitable) -> None:
+            if waitable is self:
+                self._install_filter(node.resolve_topic_name(action_name))
+            add_waitable(waitable)
+
+        node.add_waitable = install_then_add
+        try:
+            super().__init__(node, action_type, action_name, **kwargs)
+        finally:
+            if shadowed is None:
+                del node.add_waitable
+            else:
+                node.add_waitable = shadowed
+        if not self._installed:
+            self._fall_back('rclpy did not add the client through Node.add_waitable')
+
+    def _install_filter(self, resolved_action_name: str) -> None:
+        self._installed = True
+        mode = self._state.mode
+        if mode == 'off':
+            self._fall_back('feedback_filter is off', log=False)
+            return
+        if not is_content_filter_supported(self._node):
+            self._fall_back('the rmw implementation has no content filter')
+            return
+        pointer, reason = _rcl.action_feedback_subscription(
+            self._client_handle.pointer, resolved_action_name)
+        if pointer is None:
+            self._fall_back(reason)
+            return
+        plan = GoalFilterPlan(mode)
+        expression = plan.initial()
+        try:
+            _rcl.set_content_filter(pointer, expression)
+            if not _rcl.is_cft_enabled(pointer):
+                raise _rcl.ContentFilterError('the rmw accepted the filter but does not apply it')
+        except _rcl.ContentFilterError as e:
+            self._fall_back(f'installing the filter failed: {e}')
+            return
+        self._plan, self._feedback_ptr = plan, pointer
+        self._state = self._state._replace(active=True, reason='', expression=expression)
+
+    def _fall_back(self, reason: str, *, log: bool = True) -> None:
+        self._state = self._state._replace(active=False, reason=reason, expression='')
+        if log:
+            self._cft_logger.warning(
+                f'feedback filter not used, all feedback is received as with rclpy: {reason}')
+
+    def _update(self, make_expression: Callable[[], Optional[str]]) -> None:
+        """Change the filter in place; on failure, fall back to receiving all feedback."""
+        try:
+            expression = make_expression()
+            if expression is None:
+                return
+            with self._client_handle:
+                _rcl.set_content_filter(self._feedback_ptr, expression)
+        except (_rcl.ContentFilterError, ExpressionTooLong) as e:
+            self._abandon_filter(f'a filter update failed: {e}')
+            return
+        self._state = self._state._replace(expression=expression,
+                                           updates=self._state.updates + 1)
+
+    def _abandon_filter(self, reason: str) -> None:
+        # Setting "" would recreate the DataReader under a possibly waiting executor; an
+        # always-true expression is an in-place change that lets all feedback through again.
+        self._plan = None
+        try:
+            with self._client_handle:
+                _rcl.set_content_filter(self._feedback_ptr, MATCH_ALL)
+        except _rcl.ContentFilterError as e:
+            reason += f'; and letting all feedback through failed too, feedback may be lost: {e}'
+        self._fall_back(reason)
+
+    # --- public API --------------------------------------------------------------------------------
+
+    @property
+    def feedback_filter_state(self) -> FeedbackFilterState:
+        """The feedback filter's mode, whether it is active and why not, and its counters."""
+        with self._filter_lock:
+            return self._state._replace(
+                live_goals=self._plan.live_goals if self._plan else 0,
+                feedback_taken=self._feedback_taken, feedback_dropped=self._feedback_dropped)
+
+    def new_goal_uuid(self) -> UUID:
+        """
+        Return a fresh goal UUID that the feedback filter already matches.
+
+        Use it for ``send_goal_async(goal_uuid=...)`` when the caller must know the id before
+        sending: a UUID of one's own costs a filter update, this one does not.
+
+        :return: In ``client`` mode a UUID that starts with this client's tag; in ``goals`` mode
+            one already announced to the server; otherwise a random UUID.
+        """
+        with self._filter_lock:
+            raw = self._plan.uuid_for_feedback() if self._plan else random_uuid4()
+        return UUID(uuid=list(raw))
+
+    def send_goal_async(self, goal: Any, feedback_callback: Optional[Callable] = None,
+                        goal_uuid: Optional[UUID] = None) -> Future:
+        """
+        Send a goal and asynchronously get the result.
+
+        The result of the returned Future is set to a ClientGoalHandle when receipt of the goal
+        is acknowledged by an action server.
+
+        When the filter must grow to match this goal, it grows before the request is sent.
+
+        :param goal: The goal request.
+        :type goal: action_type.Goal
+        :param feedback_callback: Callback function for feedback associated with the goal.
+            A goal without one receives no feedback at all.
+        :type feedback_callback: function
+        :param goal_uuid: Universally unique identifier for the goal.
+            If None, then a UUID that the feedback filter matches is generated.
+        :type: unique_identifier_msgs.UUID
+        :return: a Future instance to a goal handle that completes when the goal request
+            has been accepted or rejected.
+        :rtype: :class:`rclpy.task.Future` instance
+        :raises: TypeError if the type of the passed goal isn't an instance of
+          the Goal type of the provided action when the service was
+          constructed.
+        """
+        if not isinstance(goal, self._action_type.Goal):
+            raise TypeError()
+        with self._filter_lock:
+            if self._plan is not None:
+                if goal_uuid is None:
+                    raw = (self._plan.uuid_for_feedback() if feedback_callback is not None
+                           else self._plan.untagged_uuid())
+                    goal_uuid = UUID(uuid=list(raw))
+                if feedback_callback is not None:
+                    self._watch(bytes(goal_uuid.uuid))
+            return super().send_goal_async(goal, feedback_callback, goal_uuid)
+
+    def destroy(self) -> None:
+        """Destroy the underlying action client handle."""
+        self._node.destroy_timer(self._release_timer)
+        super().destroy()
+
+    # --- goal bookkeeping --------------------------------------------------------------------------
+
+    def _watch(self, goal_uuid: bytes) -> None:
+        self._last_activity = time.monotonic()
+        self._finished.pop(goal_uuid, None)
+        if not self._plan.watch(goal_uuid):
+            return
+        if self._plan.mode == 'client' and not self._logged_explicit_uuid:
+            self._logged_explicit_uuid = True
+            self._cft_logger.info(
+                "a goal_uuid without this client's tag is added to the feedback filter, which "
+                'costs a filter update at the server; ActionClient.new_goal_uuid() avoids it')
+        self._update(self._plan.grow)
+
+    def _remove_pending_result_request(self, future: Future) -> None:
+        # rclpy drops a goal's feedback callback as soon as its result arrives, and so loses the
+        # goal's feedback still queued behind the result (measured: 559 of 600 with 200 goals).
+        # Here the goal counts as finished and is released after the grace period instead.
+        sequence_number = self._remove_pending_request(future, self._pending_result_requests)
+        goal_id = self._result_sequence_number_to_goal_id.pop(sequence_number, None)
+        if goal_id is not None:
+            self._note_finished([bytes(goal_id.uuid)])
+
+    def take_data(self) -> dict:
+        """Take stuff from lower level so the wait set doesn't immediately wake again."""
+        data = super().take_data()
+        feedback = data.get('feedback')
+        if feedback is not None:
+            self._feedback_taken += 1
+            if bytes(feedback.goal_id.uuid) not in self._feedback_callbacks:
+                self._feedback_dropped += 1
+        return data
+
+    async def execute(self, taken_data: dict) -> None:
+        """Execute work after data has been taken from a ready wait set.
+
+        As rclpy's, and it also notes goals that finished (rejected, succeeded, canceled or
+        aborted), so that their callbacks and filter terms are released even if nobody asks for
+        their results.
+        """
+        finished = []
+        if 'goal' in taken_data:
+            sequence_number, response = taken_data['goal']
+            goal_id = self._goal_sequence_number_to_goal_id.get(sequence_number)
+            if goal_id is not None and not response.accepted:
+                finished.append(bytes(goal_id.uuid))
+        await super().execute(taken_data)
+        if 'status' in taken_data:
+            finished += [bytes(s.goal_info.goal_id.uuid) for s in taken_data['status'].status_list
+                         if s.status in _TERMINAL]
+        if finished:
+            self._note_finished(finished)
+
+    def _note_finished(self, goal_uuids: list[bytes]) -> None:
+        now = time.monotonic()
+        with self._filter_lock:
+            new = [u for u in goal_uuids
+                   if u in self._feedback_callbacks and u not in self._finished]
+            for goal_uuid in new:
+                self._finished[goal_uuid] = now
+            if new:
+                self._last_activity = now
+                if self._release_timer.is_canceled():
+                    self._release_timer.reset()
+
+    def _release_finished_goals(self) -> None:
+        """Drop callbacks and filter terms of goals that finished a grace period ago."""
+        now = time.monotonic()
+        with self._filter_lock:
+            for goal_uuid, finished_at in list(self._finished.items()):
+                if now - finished_at >= FINISHED_GOAL_GRACE:
+                    del self._finished[goal_uuid]
+                    self._feedback_callbacks.pop(goal_uuid, None)
+                    if self._plan is not None:
+                        self._plan.finish(goal_uuid)
+            if self._plan is not None and now - self._last_activity >= FINISHED_GOAL_GRACE:
+                self._update(self._plan.shrink)
+            if not self._finished and (self._plan is None or not self._plan.has_stale_terms()):
+                self._release_timer.cancel()

@@ -1,0 +1,98 @@
+"""A client process for the ActionClient tests: sends goals on command and reports what arrived.
+
+Usage: fib_client.py ACTION MODE GOALS ORDER
+MODE is a cft_action feedback_filter mode. Before ``READY`` the client completes one goal of order
+0 (no feedback): wait_for_server only sees the server in the graph, while this round trip proves
+that the endpoints matched; goals sent too early were lost here. Then the line ``go`` sends GOALS
+goals of ORDER feedback messages each, waits for their results, and prints ``RESULT <json>``.
+"""
+
+import json
+import sys
+import time
+import uuid
+
+import rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from test_msgs.action import Fibonacci
+from unique_identifier_msgs.msg import UUID
+
+from cft_action import ActionClient
+
+
+# rclpy's default depth of 10 drops goal responses and feedback in bursts; as the server's.
+DEEP = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+DEEP_QOS = {'goal_service_qos_profile': DEEP, 'result_service_qos_profile': DEEP,
+            'cancel_service_qos_profile': DEEP, 'feedback_sub_qos_profile': DEEP}
+
+
+def spin_until_done(node: Node, future, timeout: float) -> bool:
+    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
+    return future.done()
+
+
+def main() -> None:
+    action, mode, goals, order = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+    rclpy.init()
+    node = Node(f'cft_test_client_{uuid.uuid4().hex[:8]}')
+    if mode == 'rclpy':
+        from rclpy.action import ActionClient as RclpyActionClient
+        client = RclpyActionClient(node, Fibonacci, action, **DEEP_QOS)
+        client.new_goal_uuid = lambda: UUID(uuid=list(uuid.uuid4().bytes))
+    else:
+        client = ActionClient(node, Fibonacci, action, feedback_filter=mode, **DEEP_QOS)
+    probe = client.send_goal_async(Fibonacci.Goal(order=0)) \
+        if client.wait_for_server(timeout_sec=20) else None
+    if probe is None or not spin_until_done(node, probe, 20) or \
+            not spin_until_done(node, probe.result().get_result_async(), 20):
+        print('NO SERVER', flush=True)
+        return
+    print('READY', flush=True)
+    sys.stdin.readline()
+
+    received: dict[bytes, list[int]] = {}
+    misrouted = 0
+
+    def callback_for(goal_uuid: bytes):
+        def on_feedback(msg):
+            nonlocal misrouted
+            if bytes(msg.goal_id.uuid) != goal_uuid:
+                misrouted += 1
+            received[goal_uuid].append(msg.feedback.sequence[0])
+        return on_feedback
+
+    results = []
+    for _ in range(goals):
+        goal_uuid = client.new_goal_uuid()
+        key = bytes(goal_uuid.uuid)
+        received[key] = []
+        future = client.send_goal_async(Fibonacci.Goal(order=order), callback_for(key),
+                                        goal_uuid=goal_uuid)
+        future.add_done_callback(lambda f: results.append(f.result().get_result_async()))
+        rclpy.spin_once(node, timeout_sec=0)  # a backlog past the queue depths would drop data
+    deadline = time.monotonic() + 60
+    while time.monotonic() < deadline and not (
+            len(results) == goals and all(r.done() for r in results)):
+        rclpy.spin_once(node, timeout_sec=0.05)
+    end = time.monotonic() + 1.0  # stragglers, and anything that should not arrive
+    while time.monotonic() < end:
+        rclpy.spin_once(node, timeout_sec=0.05)
+    state = getattr(client, 'feedback_filter_state', None)
+    print('RESULT ' + json.dumps({
+        'complete_goals': sum(ks == list(range(order)) for ks in received.values()),
+        'own_received': sum(len(ks) for ks in received.values()),
+        'misrouted': misrouted,
+        'results': sum(r.done() for r in results),
+        **({'taken': state.feedback_taken, 'dropped': state.feedback_dropped,
+            'active': state.active, 'reason': state.reason, 'updates': state.updates}
+           if state else {}),
+    }), flush=True)
+    sys.stdin.readline()
+    client.destroy()
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+if __name__ == '__main__':
+    main()

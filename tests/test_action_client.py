@@ -1,0 +1,287 @@
+"""The drop-in ActionClient against a real ActionServer in another process."""
+
+import json
+import threading
+import time
+import uuid
+
+import pytest
+from action_msgs.msg import GoalStatus
+from rclpy.executors import MultiThreadedExecutor
+from rclpy.qos import QoSProfile
+from test_msgs.action import Fibonacci
+from unique_identifier_msgs.msg import UUID
+
+import cft_action.client
+from cft_action import ActionClient, guard
+from cft_action.client import FINISHED_GOAL_GRACE
+from cft_action.filters import NEVER_MATCH
+from tests.support import ChildProcess, RosSession, unique_name
+
+PERIOD = 0.01  # 100 Hz feedback per goal
+
+
+def start_server(action, *, guarded=True, period=PERIOD):
+    env = guard.environment() if guarded else None
+    return ChildProcess('fib_server.py', [action, period], env=env)
+
+
+@pytest.fixture
+def server():
+    """A guarded server; yields (action name, process); asserts the server survived."""
+    action = '/' + unique_name('fib')
+    child = start_server(action)
+    try:
+        yield action, child
+        assert child.proc.poll() is None, f'server died: {child.stderr_lines[-20:]}'
+    finally:
+        child.stop()
+
+
+def run_clients(server, action, mode, clients, goals, order):
+    children = [ChildProcess('fib_client.py', [action, mode, goals, order])
+                for _ in range(clients)]
+    try:
+        for child in children:
+            child.send('go')
+        return [json.loads(c.expect('RESULT', timeout=90).split(' ', 1)[1]) for c in children]
+    finally:
+        for child in children:
+            child.stop()
+
+
+def server_published(child):
+    return int(child.request('stats', 'STATS').split()[1])
+
+
+@pytest.mark.parametrize('mode, guarded', [
+    ('client', True), ('goals', True), ('off', True),
+    ('client', False),  # the default mode is safe for an unguarded server at 100 Hz
+], ids=['client', 'goals', 'off', 'client-unguarded-server'])
+def test_three_clients_each_get_exactly_their_own_feedback(ros, mode, guarded):
+    clients, goals, order = 3, 5, 10
+    action = '/' + unique_name('fib')
+    child = start_server(action, guarded=guarded)
+    try:
+        reports = run_clients(child, action, mode, clients, goals, order)
+        published = server_published(child)
+        assert child.proc.poll() is None, 'server died'
+    finally:
+        child.stop()
+    own = goals * order
+    assert published == clients * own
+    for report in reports:
+        assert report['results'] == goals
+        assert report['complete_goals'] == goals, report
+        assert report['own_received'] == own
+        assert report['misrouted'] == 0
+        if mode == 'off':
+            assert not report['active'] and report['reason'] == 'feedback_filter is off'
+            assert report['taken'] == published
+        else:
+            assert report['active'], report['reason']
+            assert report['taken'] == own, 'foreign feedback was taken from rcl'
+            assert report['dropped'] == 0
+
+
+@pytest.mark.parametrize('mode, goals', [('client', 200)])
+def test_feedback_published_in_the_first_line_of_execute_all_arrives(ros, server, mode, goals):
+    action, child = server
+    [report] = run_clients(child, action, mode, 1, goals, 3)
+    assert report['active']
+    assert report['complete_goals'] == goals
+    assert report['updates'] == 0
+
+
+@pytest.mark.parametrize('mode, goals', [('client', 500), ('goals', 200)])
+def test_many_concurrent_goals_keep_the_filter_active(ros, mode, goals):
+    action = '/' + unique_name('fib')
+    # Each goal lives 3 s, so all are live at once, and the feedback stays near 1000 messages/s,
+    # which one Python client on this 2-core machine takes without overflowing its queues.
+    child = start_server(action, period=0.5)
+    try:
+        [report] = run_clients(child, action, mode, 1, goals, 6)
+        assert child.proc.poll() is None, 'server died'
+    finally:
+        child.stop()
+    assert report['active'], report['reason']
+    assert report['complete_goals'] == goals
+    assert report['taken'] == report['own_received'] == goals * 6
+    if mode == 'client':
+        assert report['updates'] == 0
+    else:
+        assert report['updates'] < goals / 10, 'goals were not batched'
+
+
+# --- in-process clients against a server process --------------------------------------------------
+
+def make_client(ros, action, **kwargs):
+    client = ActionClient(ros.node, Fibonacci, action, **kwargs)
+    assert client.wait_for_server(timeout_sec=20)
+    return client
+
+
+def send(ros, client, order, **kwargs):
+    future = client.send_goal_async(Fibonacci.Goal(order=order), **kwargs)
+    assert ros.spin_until(future.done, 20)
+    return future.result()
+
+
+def result_of(ros, goal_handle):
+    future = goal_handle.get_result_async()
+    assert ros.spin_until(future.done, 30)
+    return future.result()
+
+
+def test_default_mode_is_client_with_a_tag_and_a_fixed_filter(ros, server):
+    action, _ = server
+    client = make_client(ros, action)
+    state = client.feedback_filter_state
+    assert (state.mode, state.active, state.reason, state.updates) == ('client', True, '', 0)
+    tag = client.new_goal_uuid().uuid[:4]
+    assert state.expression == ' AND '.join(f'goal_id.uuid[{i}] = {b}' for i, b in enumerate(tag))
+    generated = uuid.UUID(bytes=bytes(client.new_goal_uuid().uuid))
+    assert generated.version == 4 and generated.variant == uuid.RFC_4122
+
+
+def test_explicit_uuid_without_the_tag_still_gets_its_feedback(ros, server):
+    action, _ = server
+    client = make_client(ros, action)
+    own = UUID(uuid=list(uuid.uuid4().bytes))
+    received = []
+    handle = send(ros, client, 5, feedback_callback=received.append, goal_uuid=own)
+    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+    ros.spin_until(lambda: len(received) == 5, 5)
+    assert [m.feedback.sequence[0] for m in received] == list(range(5))
+    assert all(bytes(m.goal_id.uuid) == bytes(own.uuid) for m in received)
+    assert client.feedback_filter_state.updates == 1
+
+
+def test_goal_without_feedback_callback_receives_no_feedback(ros, server):
+    action, _ = server
+    client = make_client(ros, action)
+    handle = send(ros, client, 5)
+    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+    ros.spin_for(0.3)
+    assert client.feedback_filter_state.feedback_taken == 0
+
+
+@pytest.mark.parametrize('mode', ['client', 'goals'])
+def test_cancel_and_reject_behave_as_rclpy_and_release_callbacks(ros, server, mode):
+    action, _ = server
+    client = make_client(ros, action, feedback_filter=mode)
+    received = []
+    rejected = send(ros, client, -1, feedback_callback=received.append)
+    assert not rejected.accepted
+    handle = send(ros, client, 10000, feedback_callback=received.append)
+    assert handle.accepted
+    assert ros.spin_until(lambda: len(received) >= 3, 10)
+    cancel = handle.cancel_goal_async()
+    assert ros.spin_until(cancel.done, 10)
+    assert len(cancel.result().goals_canceling) == 1
+    assert result_of(ros, handle).status == GoalStatus.STATUS_CANCELED
+    # nobody asked for the rejected goal's result: its callback is released all the same
+    assert ros.spin_until(lambda: not client._feedback_callbacks, FINISHED_GOAL_GRACE * 4)
+    state = client.feedback_filter_state
+    assert state.live_goals == 0
+    if mode == 'goals':
+        assert ros.spin_until(lambda: client.feedback_filter_state.live_goals == 0, 5)
+
+
+def test_finished_goals_are_released_without_asking_for_results(ros, server):
+    """rclpy keeps feedback callbacks until the result is requested; finished goals leak there."""
+    action, _ = server
+    client = make_client(ros, action, feedback_filter='goals')
+    handles = [send(ros, client, 2, feedback_callback=lambda m: None) for _ in range(20)]
+    assert all(h.accepted for h in handles)
+    assert ros.spin_until(lambda: all(h.status == GoalStatus.STATUS_SUCCEEDED for h in handles),
+                          15)
+    assert ros.spin_until(lambda: not client._feedback_callbacks, FINISHED_GOAL_GRACE * 5)
+    assert ros.spin_until(lambda: client.feedback_filter_state.live_goals == 0, 5)
+    state = client.feedback_filter_state
+    assert state.active and state.updates <= 3
+
+
+def test_goals_mode_starts_with_announced_reserve_and_never_empty(ros, server):
+    action, _ = server
+    client = make_client(ros, action, feedback_filter='goals')
+    state = client.feedback_filter_state
+    assert state.active and state.updates == 0
+    assert state.expression and state.expression != NEVER_MATCH  # the reserve is announced
+    received = []
+    handle = send(ros, client, 3, feedback_callback=received.append)
+    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+    assert ros.spin_until(lambda: len(received) == 3, 5)
+    assert client.feedback_filter_state.updates == 0
+
+
+def test_destroy(ros, server):
+    action, _ = server
+    client = make_client(ros, action)
+    handle = send(ros, client, 3, feedback_callback=lambda m: None)
+    result_of(ros, handle)
+    client.destroy()
+    assert client not in list(ros.node.waitables)
+    assert ros.node.count_subscribers(f'{action}/_action/feedback') == 0 or \
+        ros.spin_until(lambda: ros.node.count_subscribers(f'{action}/_action/feedback') == 0, 5)
+
+
+def test_multithreaded_executor_with_goals_sent_from_another_thread(server):
+    action, _ = server
+    ros = RosSession(MultiThreadedExecutor, num_threads=4)
+    spinner = threading.Thread(target=ros.executor.spin, daemon=True)
+    spinner.start()
+    try:
+        time.sleep(0.2)  # the executor is waiting when the client is created
+        client = ActionClient(ros.node, Fibonacci, action, feedback_filter='goals',
+                              feedback_sub_qos_profile=QoSProfile(depth=1000))
+        assert client.wait_for_server(timeout_sec=20)
+        lock = threading.Lock()
+        received: dict[int, list[int]] = {}
+
+        def sender(index):
+            def on_feedback(msg, index=index):
+                with lock:
+                    received.setdefault(index, []).append(msg.feedback.sequence[0])
+            result = client.send_goal(Fibonacci.Goal(order=5), feedback_callback=on_feedback)
+            assert result.status == GoalStatus.STATUS_SUCCEEDED
+
+        threads = [threading.Thread(target=sender, args=(i,)) for i in range(12)]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(timeout=30)
+        assert not any(t.is_alive() for t in threads)
+        deadline = time.monotonic() + 5
+        while time.monotonic() < deadline and any(len(v) < 5 for v in received.values()):
+            time.sleep(0.05)
+        assert {i: sorted(v) for i, v in received.items()} == {i: list(range(5)) for i in range(12)}
+        assert client.feedback_filter_state.active
+    finally:
+        ros.close()
+        spinner.join(timeout=5)
+
+
+def test_fallback_through_an_unavailable_binding(ros, server, monkeypatch):
+    action, _ = server
+    monkeypatch.setattr(cft_action.client._rcl, 'action_feedback_subscription',
+                        lambda pointer, name: (None, 'layout check failed: forced by the test'))
+    client = make_client(ros, action)
+    state = client.feedback_filter_state
+    assert not state.active and 'forced by the test' in state.reason and state.expression == ''
+    received = []
+    handle = send(ros, client, 4, feedback_callback=received.append)
+    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+    assert ros.spin_until(lambda: len(received) == 4, 5)
+
+
+def test_mode_from_environment_and_bad_values(ros, server, monkeypatch):
+    action, _ = server
+    monkeypatch.setenv('CFT_ACTION_FEEDBACK_FILTER', 'off')
+    assert make_client(ros, action, feedback_filter='goals').feedback_filter_state.mode == 'off'
+    monkeypatch.setenv('CFT_ACTION_FEEDBACK_FILTER', 'everything')
+    with pytest.raises(ValueError, match='CFT_ACTION_FEEDBACK_FILTER'):
+        ActionClient(ros.node, Fibonacci, action)
+    monkeypatch.delenv('CFT_ACTION_FEEDBACK_FILTER')
+    with pytest.raises(ValueError, match="feedback_filter='sometimes'"):
+        ActionClient(ros.node, Fibonacci, action, feedback_filter='sometimes')
