@@ -33,8 +33,10 @@ FEEDBACK_FILTER_ENV = 'CFT_ACTION_FEEDBACK_FILTER'
 _TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
                        GoalStatus.STATUS_ABORTED})
 
-#: Seconds a finished goal keeps its callback and filter term: feedback and status travel on
-#: different topics, so the last feedback may arrive after the terminal status.
+#: Seconds a finished goal keeps its callback and filter term: feedback, status and result travel
+#: on different topics, so the last feedback may arrive after them. The callback is also kept
+#: until the feedback queue has been seen empty since the goal finished, so that feedback queued
+#: behind a result on a busy client is still delivered.
 FINISHED_GOAL_GRACE = 1.0
 
 
@@ -111,6 +113,7 @@ class ActionClient(_RclpyActionClient):
         self._finished: dict[bytes, float] = {}  # goal UUID -> when it finished
         self._last_activity = time.monotonic()
         self._logged_explicit_uuid = False
+        self._feedback_drained_at = time.monotonic()  # last wait that found no feedback queued
         self._feedback_taken = 0
         self._feedback_dropped = 0
         self._install_before_first_wait(node, action_type, action_name, kwargs)
@@ -294,6 +297,13 @@ class ActionClient(_RclpyActionClient):
         if goal_id is not None:
             self._note_finished([bytes(goal_id.uuid)])
 
+    def is_ready(self, wait_set) -> bool:
+        """Return True if one or more entities are ready in the wait set."""
+        ready = super().is_ready(wait_set)
+        if not self._is_feedback_ready:
+            self._feedback_drained_at = time.monotonic()
+        return ready
+
     def take_data(self) -> dict:
         """Take stuff from lower level so the wait set doesn't immediately wake again."""
         data = super().take_data()
@@ -341,7 +351,8 @@ class ActionClient(_RclpyActionClient):
         now = time.monotonic()
         with self._filter_lock:
             for goal_uuid, finished_at in list(self._finished.items()):
-                if now - finished_at >= FINISHED_GOAL_GRACE:
+                if (now - finished_at >= FINISHED_GOAL_GRACE
+                        and finished_at < self._feedback_drained_at):
                     del self._finished[goal_uuid]
                     self._feedback_callbacks.pop(goal_uuid, None)
                     if self._plan is not None:

@@ -14,15 +14,17 @@ import uuid
 
 import rclpy
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient
 
 
-# rclpy's default depth of 10 drops goal responses and feedback in bursts; as the server's.
-DEEP = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
+# rclpy's default depth of 10 drops goal responses and feedback in bursts, and any keep-last
+# queue drops when this process lags on a loaded machine: keep all, as the server does.
+DEEP = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
+                  reliability=ReliabilityPolicy.RELIABLE)
 DEEP_QOS = {'goal_service_qos_profile': DEEP, 'result_service_qos_profile': DEEP,
             'cancel_service_qos_profile': DEEP, 'feedback_sub_qos_profile': DEEP}
 

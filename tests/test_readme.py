@@ -1,0 +1,42 @@
+"""The README's runnable examples run, so they cannot go stale."""
+
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+from cft_action import guard
+from tests.support import ChildProcess
+
+README = Path(__file__).parent.parent / 'README.md'
+
+
+def readme_example(name: str) -> str:
+    match = re.search(rf'<!-- example: {name} -->\n```python\n(.*?)```', README.read_text(),
+                      re.DOTALL)
+    assert match, f'README has no example {name}'
+    return match.group(1)
+
+
+def test_readme_starts_with_the_two_set_up_commands():
+    first_block = re.search(r'```bash\n(.*?)```', README.read_text(), re.DOTALL).group(1)
+    assert [line.split('#')[0].strip() for line in first_block.splitlines()] == \
+        ['make demo', 'make test']
+
+
+def test_tutorial_client_runs_unchanged_but_for_the_import(tmp_path):
+    source = readme_example('tutorial_client')
+    assert 'from rclpy.action import ActionClient' not in source
+    script = tmp_path / 'tutorial_client.py'
+    script.write_text(source)
+    server = ChildProcess('fib_server.py', ['fibonacci', 0.01], env=guard.environment())
+    try:
+        run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                             timeout=60)
+    finally:
+        server.stop()
+    log = run.stdout + run.stderr
+    assert run.returncode == 0, log
+    assert 'Goal accepted :)' in log
+    assert log.count('Received feedback: array') == 10
+    assert 'Result: array' in log
