@@ -15,6 +15,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, Int32, String
 
+from _polling import wait_until
+
 WORDS = ('hello', 'world', 'hello world')
 
 
@@ -37,14 +39,8 @@ def main() -> None:
         if command == 'wait':
             topic, count = argument.split()
             publisher = publishers[topic][0]
-            deadline = time.monotonic() + 20
-            while publisher.get_subscription_count() != int(count):
-                if time.monotonic() > deadline:
-                    print('TIMEOUT', flush=True)
-                    break
-                time.sleep(0.05)
-            else:
-                print('MATCHED', flush=True)
+            matched = wait_until(lambda: publisher.get_subscription_count() == int(count))
+            print('MATCHED' if matched else 'TIMEOUT', flush=True)
         elif command == 'burst':
             count, _, period = argument.partition(' ')
             for i in range(int(count)):

@@ -1,0 +1,525 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""A drop-in :class:`rclpy.parameter_event_handler.ParameterEventHandler` filtered by node.
+
+Every node publishes its parameter changes on the one ``/parameter_events`` topic, and rclpy's
+handler subscribes to all of it: it receives and deserializes the whole system's parameter traffic
+to find the few events its callbacks ask for. This handler content-filters its subscription on the
+event's ``node`` field (``node = %0 OR node = %1 ...``), so that the publishers' DataWriters send it
+only the events of the nodes that its parameter callbacks watch.
+
+What the middleware filters, and what stays in Python:
+
+- **By node, in the middleware.** The filter covers exactly the nodes of the registered parameter
+  callbacks, and changes only when that set of nodes changes.
+- **By parameter name, in Python, as in rclpy.** DDS SQL has no "any element of" operator: Fast DDS
+  accepts ``changed_parameters[0].name = %0``, but that tests one fixed position of the sequence,
+  and an event carries any number of parameters, in the order of the set request, split between
+  ``new_parameters`` and ``changed_parameters``. A name filter would have to OR every position up to
+  an arbitrary bound and would still miss the parameters beyond it, so the handler filters names
+  client-side, exactly as rclpy does.
+- **Node-agnostic callbacks see everything.** While a callback added with
+  :meth:`ParameterEventHandler.add_parameter_event_callback` is registered, every event must
+  arrive, so the handler lets all of them through and says so in
+  :attr:`ParameterEventHandler.parameter_event_filter_state`.
+
+How the filter is changed safely. rmw_fastrtps destroys and recreates the DataReader when a reader
+gets its first filter, and again when the filter is set back to ``""``; doing either while an
+executor waits on the subscription is a use-after-free. So the subscription is created with a
+filter before any executor can see it, and every later change is an in-place change from one
+non-empty expression to another: "no node" is an expression that never matches, and "every node"
+is ``node = node``, which always does.
+
+The node's time source does not depend on this subscription: rclpy's
+:class:`rclpy.time_source.TimeSource` follows ``use_sim_time`` through
+``Node.add_on_set_parameters_callback``, not through ``/parameter_events``, so no filter set here
+can hide a ``use_sim_time`` change from the node's clock.
+
+The hazard. Each filter change, and the creation and destruction of the filtered reader, is an
+event at every ``/parameter_events`` writer in the domain, that is, at every node with parameter
+events enabled, not only at the watched ones. With Fast DDS 2.14 such an event can crash a process
+that publishes at that moment (eProsima/Fast-DDS#4878, NOTES.md section 4). Measured with
+``demos/parameter_events.py --soak``: 20 nodes in one process, each changing a parameter at 10 Hz,
+crashed within 2, 10 and 102 updates (one every 50 ms); under :mod:`cft_action.guard` they survived
+500. This handler therefore changes its filter only when the set of watched nodes changes; where
+nodes publish parameter events often, run them under the guard.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import Counter
+from typing import Callable, NamedTuple, Optional, Sequence, Union
+
+import rclpy
+from rcl_interfaces.msg import ParameterEvent
+from rclpy.callback_groups import CallbackGroup
+from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_event_handler import (
+    ParameterCallbackHandle,
+    ParameterEventCallbackHandle,
+    ParameterEventHandler as _RclpyParameterEventHandler,
+)
+from rclpy.qos import qos_profile_parameter_events, QoSProfile
+from rclpy.qos_overriding_options import QoSOverridingOptions
+from rclpy.subscription import Subscription
+
+from cft_action._rcl import ContentFilterError
+from cft_action.filters import dds_literal, dds_literals, Literal, never_match_on
+from cft_action.subscription import (
+    ContentFilterOptions,
+    create_filtered_subscription,
+    get_content_filter,
+    is_content_filter_supported,
+    is_filtered,
+    set_content_filter,
+)
+
+__all__ = [
+    'ALL_NODES', 'NO_NODES', 'ParameterEventFilterState', 'ParameterEventHandler',
+    'node_filter', 'PARAMETER_EVENTS_TOPIC',
+]
+
+PARAMETER_EVENTS_TOPIC = '/parameter_events'
+
+#: The field of ``rcl_interfaces/msg/ParameterEvent`` that the filter tests.
+NODE_FIELD = 'node'
+
+#: An expression that every parameter event matches: "all nodes", reachable in place.
+ALL_NODES = f'{NODE_FIELD} = {NODE_FIELD}'
+
+#: An expression that no parameter event matches: "no node", used instead of ``""``, which would
+#: make rmw_fastrtps recreate the DataReader.
+NO_NODES = never_match_on(NODE_FIELD)
+
+#: Fast DDS accepts at most ``%0`` .. ``%99``.
+MAX_EXPRESSION_PARAMETERS = 100
+
+_EVENT_CALLBACK_REASON = ('a parameter event callback (add_parameter_event_callback) is registered '
+                          'and needs the events of every node')
+
+
+class ParameterEventFilterState(NamedTuple):
+    """A snapshot of a :class:`ParameterEventHandler`'s filter.
+
+    :ivar mode: ``'nodes'`` (filtered on the watched nodes), ``'all'`` (a parameter event callback
+        needs every event), ``'user'`` (an expression set by
+        :meth:`ParameterEventHandler.set_parameter_event_filter`) or ``'off'`` (no content filter
+        can be used; see ``reason``).
+    :ivar active: whether the middleware narrows what the subscription receives.
+    :ivar reason: why the filter is not active; empty when it is.
+    :ivar expression: the filter expression in force; empty when not active.
+    :ivar expression_parameters: its parameters, as DDS literals; empty when not active.
+    :ivar updates: filter changes sent after the subscription was created; each one reaches every
+        ``/parameter_events`` writer in the domain.
+    :ivar watched_nodes: fully qualified names of the nodes that parameter callbacks watch, sorted.
+    :ivar events_received: parameter events taken by the subscription, whichever callbacks they
+        reached.
+    """
+
+    mode: str
+    active: bool
+    reason: str
+    expression: str
+    expression_parameters: tuple[str, ...]
+    updates: int
+    watched_nodes: tuple[str, ...]
+    events_received: int
+
+
+def _is_quotable(node_name: str) -> bool:
+    try:
+        dds_literal(node_name)
+    except ValueError:
+        return False
+    return True
+
+
+def node_filter(node_names: Sequence[str]) -> ContentFilterOptions:
+    """Return the filter that matches the parameter events of exactly ``node_names``.
+
+    The names are sorted, so that the same set always gives the same expression. Up to 100 names
+    are passed as parameters, ``node = %0 OR node = %1 ...``, each quoted as a DDS literal; beyond
+    Fast DDS's 100 parameters, the quoted names are written into the expression itself. No names
+    give :data:`NO_NODES`.
+
+    :param node_names: Fully qualified node names, as in ``ParameterEvent.node``.
+    :raises ValueError: if a name contains a quote character, which no DDS literal can hold (and
+        no ROS node name contains).
+    """
+    names = sorted(set(node_names))
+    if not names:
+        return ContentFilterOptions(NO_NODES, [])
+    literals = dds_literals(names)
+    if len(names) <= MAX_EXPRESSION_PARAMETERS:
+        return ContentFilterOptions(
+            ' OR '.join(f'{NODE_FIELD} = %{i}' for i in range(len(names))), literals)
+    return ContentFilterOptions(' OR '.join(f'{NODE_FIELD} = {lit}' for lit in literals), [])
+
+
+class ParameterEventHandler(_RclpyParameterEventHandler):
+    """A ParameterEventHandler whose subscription receives only the nodes it watches.
+
+    It takes the same arguments and has the same methods as
+    :class:`rclpy.parameter_event_handler.ParameterEventHandler`, and runs the same callbacks in the
+    same order; it only receives fewer events. The middleware filters by node; parameter names are
+    still filtered in Python, because DDS SQL cannot test "any element" of the event's parameter
+    sequences (see the module documentation).
+    """
+
+    def __init__(
+        self,
+        node: Node,
+        qos_profile: Union[QoSProfile, int] = qos_profile_parameter_events,
+        callback_group: Optional[CallbackGroup] = None,
+        event_callbacks: Optional[SubscriptionEventCallbacks] = None,
+        qos_overriding_options: Optional[QoSOverridingOptions] = None,
+        raw: bool = False,
+    ) -> None:
+        """
+        Create ParameterEventHandler.
+
+        Usage example:
+
+        .. code-block:: python
+            import rclpy
+            from cft_action import ParameterEventHandler
+
+            handler = ParameterEventHandler(node)
+
+            # Add parameter callback: the subscription now receives the events of /example only
+            handle = handler.add_parameter_callback(
+                parameter_name="example_parameter",
+                node_name="example",
+                callback=example_callable,
+            )
+
+            # Remove parameter callback: the subscription receives nothing
+            handler.remove_parameter_callback(handle)
+
+            # Add parameter event callback: the subscription receives every event
+            handle = handler.add_parameter_event_callback(
+                callback=example_callable,
+            )
+
+            # Remove parameter event callback
+            handler.remove_parameter_event_callback(handle)
+        ..
+
+        The subscription is created with a filter that matches nothing, because no callback is
+        registered yet, and grows as parameter callbacks are added. Where no content filter can be
+        used (another rmw implementation, or the filter is rejected), the handler subscribes
+        unfiltered, as rclpy's does, logs why once, and reports it in
+        :attr:`parameter_event_filter_state`.
+
+        :param node: Used to subscribe to parameter_events topic
+        :param qos_profile: A QoSProfile or a history depth to apply to the subscription.
+            In the case that a history depth is provided, the QoS history is set to
+            KEEP_LAST, the QoS history depth is set to the value
+            of the parameter, and all other QoS settings are set to their default values.
+        :param callback_group: The callback group for the subscription. If ``None``, then the
+            default callback group for the node is used.
+        :param event_callbacks: User-defined callbacks for middleware events. Fast DDS counts the
+            events that the publishers filtered out as *lost*, so a ``message_lost`` callback
+            reports them too.
+        :param qos_overriding_options: Options to customize QoS parameter overrides.
+        :param raw: If ``True``, then received messages will be stored in raw binary
+            representation.
+        """
+        # rclpy's constructor would create an unfiltered subscription, and giving that a first
+        # filter later recreates its DataReader; so its three attributes are set here instead.
+        self.node = node
+        self.qos_profile = qos_profile
+        self._callbacks = _RclpyParameterEventHandler.Callbacks()
+
+        self._cft_logger = node.get_logger().get_child('cft_action')
+        # Guards the filter bookkeeping and the rmw calls. It is never taken while the Callbacks
+        # mutex is held, and the event path takes only _received_lock, so a callback that reads
+        # the state cannot deadlock against an add or remove in another thread.
+        self._filter_lock = threading.RLock()
+        self._received_lock = threading.Lock()
+        self._received = 0
+        self._watched: Counter[str] = Counter()  # node name -> parameter callbacks watching it
+        self._event_callback_count = 0
+        self._user_filter: Optional[ContentFilterOptions] = None
+        self._installed: Optional[ContentFilterOptions] = None  # None: no filter we may change
+        self._updates = 0
+        self._destroyed = False
+        self._state = ParameterEventFilterState('nodes', False, '', '', (), 0, (), 0)
+
+        self.parameter_event_subscription = self._subscribe(
+            callback_group, event_callbacks, qos_overriding_options, raw)
+        with self._filter_lock:
+            self._publish_state()
+
+    # --- subscription and filter ----------------------------------------------------------------
+
+    def _subscribe(self, callback_group: Optional[CallbackGroup],
+                   event_callbacks: Optional[SubscriptionEventCallbacks],
+                   qos_overriding_options: Optional[QoSOverridingOptions],
+                   raw: bool) -> Subscription:
+        if not is_content_filter_supported(self.node):
+            self._fall_back(f'the rmw implementation {rclpy.get_rmw_implementation_identifier()} '
+                            'has no content filter')
+        else:
+            try:
+                subscription = create_filtered_subscription(
+                    self.node, ParameterEvent, PARAMETER_EVENTS_TOPIC, self._on_event,
+                    self.qos_profile, NO_NODES, callback_group=callback_group,
+                    event_callbacks=event_callbacks,
+                    qos_overriding_options=qos_overriding_options, raw=raw)
+            except ContentFilterError as e:
+                self._fall_back(f'installing the filter failed: {e}')
+            else:
+                self._installed = ContentFilterOptions(NO_NODES, [])
+                return subscription
+        return self.node.create_subscription(
+            ParameterEvent, PARAMETER_EVENTS_TOPIC, self._on_event, self.qos_profile,
+            callback_group=callback_group, event_callbacks=event_callbacks,
+            qos_overriding_options=qos_overriding_options, raw=raw)
+
+    def _on_event(self, event: ParameterEvent) -> None:
+        with self._received_lock:
+            self._received += 1
+        self._callbacks.event_callback(event)
+
+    def _wanted(self) -> tuple[str, str, ContentFilterOptions]:
+        """Return ``(mode, reason, filter)`` for the callbacks registered now."""
+        if self._user_filter is not None:
+            return 'user', '', self._user_filter
+        if self._event_callback_count:
+            return 'all', _EVENT_CALLBACK_REASON, ContentFilterOptions(ALL_NODES, [])
+        return 'nodes', '', node_filter([n for n in self._watched if _is_quotable(n)])
+
+    def _refresh(self) -> None:
+        """Bring the middleware's filter in line with the callbacks, if it differs from them."""
+        with self._filter_lock:
+            if self._installed is not None:
+                _, _, wanted = self._wanted()
+                if wanted != self._installed:
+                    try:
+                        self._install(wanted)
+                    except ContentFilterError as e:
+                        self._abandon_filter(f'a filter update failed: {e}')
+            self._publish_state()
+
+    def _install(self, options: ContentFilterOptions) -> None:
+        # In place, from one non-empty expression to another: safe under a spinning executor.
+        set_content_filter(self.parameter_event_subscription, *options)
+        self._installed = options
+        self._updates += 1
+        self._cft_logger.debug(
+            f'parameter event filter: {options.filter_expression!r} '
+            f'{options.expression_parameters} (update {self._updates})')
+
+    def _publish_state(self) -> None:
+        if self._installed is None:
+            mode, reason = 'off', self._state.reason
+        else:
+            mode, reason, _ = self._wanted()
+        active = self._installed is not None and mode != 'all'
+        self._state = ParameterEventFilterState(
+            mode=mode, active=active, reason=reason,
+            expression=self._installed.filter_expression if active else '',
+            expression_parameters=tuple(self._installed.expression_parameters) if active else (),
+            updates=self._updates, watched_nodes=tuple(sorted(self._watched)), events_received=0)
+
+    def _fall_back(self, reason: str, *, log: bool = True) -> None:
+        self._installed = None
+        self._state = self._state._replace(mode='off', active=False, reason=reason)
+        if log:
+            self._cft_logger.warning(
+                'parameter event filter not used, all parameter events are received as with '
+                f'rclpy: {reason}')
+
+    def _abandon_filter(self, reason: str) -> None:
+        # Setting "" would recreate the DataReader under a possibly waiting executor; the
+        # always-true expression is an in-place change that lets every event through again.
+        try:
+            set_content_filter(self.parameter_event_subscription, ALL_NODES)
+            self._updates += 1
+        except ContentFilterError as e:
+            reason += f'; and letting all events through failed too, events may be lost: {e}'
+        self._fall_back(reason)
+
+    # --- the rclpy API ----------------------------------------------------------------------------
+
+    def add_parameter_callback(
+        self,
+        parameter_name: str,
+        node_name: str,
+        callback: Callable[[Parameter], None],
+    ) -> ParameterCallbackHandle:
+        """
+        Add new parameter callback.
+
+        Callbacks are called in FILO manner.
+
+        If no other callback watches the node, the filter grows to include it after the callback is
+        registered. The change reaches the publishers by discovery; until it arrives there, they
+        still apply the previous filter, so an event of that node published in the meantime can be
+        missed.
+
+        :param parameter_name: Name of a parameter to tie callback to
+        :param node_name: Name of a node, that the parameter should be related to
+        :param callback: A callable to be called when the parameter is modified
+
+        :return ParameterCallbackHandle: A handle that should be saved by the user
+            so that the event_callback can be later removed.
+        """
+        handle = super().add_parameter_callback(parameter_name, node_name, callback)
+        with self._filter_lock:
+            if not _is_quotable(handle.node_name):
+                # A quote cannot be in a DDS literal, nor in a ROS node name: no event can ever
+                # come from this node, so leaving it out of the filter loses nothing.
+                self._cft_logger.warning(
+                    f'parameter callback for node {handle.node_name!r}: no ROS node has this name '
+                    '(it contains a quote), so the callback will never be called')
+            self._watched[handle.node_name] += 1
+            self._refresh()
+        return handle
+
+    def remove_parameter_callback(
+        self,
+        handle: ParameterCallbackHandle,
+    ) -> None:
+        """
+        Remove a ParameterCallbackHandle.
+
+        Perform no callbacks on this parameter events in the future. If no other callback watches
+        the node, the filter shrinks to leave it out.
+
+        :param handle: ParameterCallbackHandle of a callback to be removed
+        """
+        super().remove_parameter_callback(handle)  # raises, as rclpy, for an unknown handle
+        with self._filter_lock:
+            self._watched[handle.node_name] -= 1
+            if self._watched[handle.node_name] <= 0:
+                del self._watched[handle.node_name]
+            self._refresh()
+
+    def add_parameter_event_callback(
+        self,
+        callback: Callable[[ParameterEvent], None],
+    ) -> ParameterEventCallbackHandle:
+        """
+        Add new parameter event callback.
+
+        Callbacks are called in FILO manner.
+
+        Such a callback is not tied to a node, so while one is registered the handler lets the
+        events of every node through, as rclpy's does; :attr:`parameter_event_filter_state` then
+        has mode ``'all'``. A filter set with :meth:`set_parameter_event_filter` stays in force.
+
+        :param callback: A callable to be referenced on a ParameterEvent
+
+        :return ParameterEventCallbackHandle: A handle that should be saved by the user
+            so that the event_callback can be later removed.
+        """
+        handle = super().add_parameter_event_callback(callback)
+        with self._filter_lock:
+            self._event_callback_count += 1
+            if self._event_callback_count == 1 and self._installed is not None \
+                    and self._user_filter is None:
+                self._cft_logger.info(
+                    'parameter event callback added: the parameter event handler now receives '
+                    'the events of every node, until the last such callback is removed')
+            self._refresh()
+        return handle
+
+    def remove_parameter_event_callback(
+        self,
+        handle: ParameterEventCallbackHandle,
+    ) -> None:
+        """
+        Remove a ParameterEventCallbackHandle.
+
+        Perform no callbacks on parameter events in the future. When the last one is removed, the
+        filter narrows to the nodes of the parameter callbacks again.
+
+        :param handle: ParameterEventCallbackHandle of a callback to be removed
+        """
+        super().remove_parameter_event_callback(handle)
+        with self._filter_lock:
+            self._event_callback_count -= 1
+            self._refresh()
+
+    def destroy(self) -> None:
+        """Destroy the subscription to ``/parameter_events``."""
+        with self._filter_lock:
+            self._installed = None  # no filter changes on a destroyed subscription
+            self._destroyed = True
+            self._state = self._state._replace(mode='off', active=False,
+                                               reason='the handler was destroyed',
+                                               expression='', expression_parameters=())
+        super().destroy()
+
+    # --- filter API -------------------------------------------------------------------------------
+
+    @property
+    def parameter_event_filter_state(self) -> ParameterEventFilterState:
+        """The filter's mode, whether it is active and why not, and its counters (read-only)."""
+        with self._received_lock:
+            received = self._received
+        return self._state._replace(events_received=received)
+
+    def set_parameter_event_filter(self, filter_expression: str,
+                                   expression_parameters: Sequence[Literal] = ()) -> None:
+        """
+        Set an expression of one's own on the ``/parameter_events`` subscription.
+
+        For example ``"(node = %0 AND stamp.sec > %1) OR node = %2"``. The expression replaces
+        the automatic, per-node filter, and stays in force until it is cleared: callbacks added
+        meanwhile receive only the events that it lets through.
+
+        :param filter_expression: A DDS-SQL expression over the fields of
+            ``rcl_interfaces/msg/ParameterEvent``; ``""`` clears it, and the handler filters on the
+            watched nodes again (the subscription itself is never set to ``""``).
+        :param expression_parameters: Values for ``%0`` .. ``%99``. Bare strings are quoted:
+            ``/robot/arm`` is sent as ``'/robot/arm'``.
+        :raises ContentFilterError: if the handler has no content filter (see
+            :attr:`parameter_event_filter_state`), or if the expression or a parameter is
+            rejected. The message names the expression; the previous filter stays in force.
+        """
+        with self._filter_lock:
+            if self._installed is None:
+                raise ContentFilterError(
+                    f'cannot set parameter event filter {filter_expression!r}: the handler has no '
+                    f'content filter: {self._state.reason}')
+            if not filter_expression:
+                self._user_filter = None
+                self._refresh()
+                return
+            try:
+                options = ContentFilterOptions(filter_expression,
+                                               dds_literals(expression_parameters))
+            except (TypeError, ValueError) as e:
+                raise ContentFilterError(
+                    f'parameter event filter {filter_expression!r}: bad expression parameter: '
+                    f'{e}') from e
+            if options != self._installed:
+                previous = self._installed
+                try:
+                    self._install(options)
+                except ContentFilterError as e:
+                    # An in-place change that rmw_fastrtps rejects leaves the reader as it was.
+                    raise ContentFilterError(
+                        f'parameter event filter {filter_expression!r} was rejected, the filter '
+                        f'stays {previous.filter_expression!r}: {e}', function=e.function,
+                        ret=e.ret, rcl_error=e.rcl_error) from e
+            self._user_filter = options
+            self._publish_state()
+
+    def get_parameter_event_filter(self) -> ContentFilterOptions:
+        """
+        Return the filter of the ``/parameter_events`` subscription, as the middleware reports it.
+
+        :return: ``(filter_expression, expression_parameters)``; ``('', [])`` when the
+            subscription has no content filter.
+        """
+        with self._filter_lock:
+            subscription = self.parameter_event_subscription
+            if self._destroyed or not is_filtered(subscription):
+                return ContentFilterOptions('', [])
+            return get_content_filter(subscription)

@@ -1,0 +1,94 @@
+"""Nodes whose parameters change on command; used by the parameter event handler tests.
+
+Usage: param_nodes.py NODE [NODE ...], each NODE a fully qualified name such as ``/ns/name``.
+Every node declares the integer parameters ``value`` and ``sync`` (0). Commands on stdin, one per
+line:
+  set NODE PARAM N   set PARAM of NODE to 1..N, one parameter event each; replies SET NODE PARAM N
+  burst N            set ``value`` to 1..N on every node, interleaved; replies BURST N
+  matched N          wait until every node's /parameter_events publisher has at least N matched
+                     subscriptions; replies MATCHED or TIMEOUT
+  remote NODE PARAM true|false
+                     set a bool parameter of another process's NODE through its parameter
+                     service; replies REMOTE OK or REMOTE FAIL <reason>
+"""
+
+import sys
+import threading
+
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+
+from _polling import TIMEOUT, wait_until
+
+
+
+def make_node(fully_qualified_name: str) -> Node:
+    namespace, _, name = fully_qualified_name.rpartition('/')
+    node = Node(name, namespace=namespace or '/')
+    node.declare_parameter('value', 0)
+    node.declare_parameter('sync', 0)
+    return node
+
+
+def remote_set(client: AsyncParameterClient, name: str, value: bool) -> str:
+    if not client.wait_for_services(timeout_sec=TIMEOUT):
+        return 'FAIL no parameter services'
+    future = client.set_parameters([Parameter(name, value=value)])
+    if not wait_until(future.done):
+        return 'FAIL no response'
+    results = future.result().results
+    if not all(r.successful for r in results):
+        return 'FAIL ' + '; '.join(r.reason for r in results)
+    return 'OK'
+
+
+def main() -> None:
+    rclpy.init()
+    nodes = {name: make_node(name) for name in sys.argv[1:]}
+    for name, node in nodes.items():
+        assert node.get_fully_qualified_name() == name, (name, node.get_fully_qualified_name())
+    # The parameter client needs an executor; the nodes above need none to publish their events.
+    client_node = Node('cft_test_param_client')
+    executor = SingleThreadedExecutor()
+    executor.add_node(client_node)
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    clients: dict[str, AsyncParameterClient] = {}
+    print('READY', flush=True)
+    for line in sys.stdin:
+        words = line.split()
+        if not words:
+            continue
+        if words[0] == 'set':
+            target, param, count = words[1], words[2], int(words[3])
+            for i in range(1, count + 1):
+                nodes[target].set_parameters([Parameter(param, value=i)])
+            print(f'SET {target} {param} {count}', flush=True)
+        elif words[0] == 'burst':
+            count = int(words[1])
+            for i in range(1, count + 1):
+                for node in nodes.values():
+                    node.set_parameters([Parameter('value', value=i)])
+            print(f'BURST {count}', flush=True)
+        elif words[0] == 'matched':
+            wanted = int(words[1])
+            matched = wait_until(lambda: all(
+                n._parameter_event_publisher.get_subscription_count() >= wanted
+                for n in nodes.values()))
+            print('MATCHED' if matched else 'TIMEOUT', flush=True)
+        elif words[0] == 'remote':
+            if words[1] not in clients:
+                clients[words[1]] = AsyncParameterClient(client_node, words[1])
+            reply = remote_set(clients[words[1]], words[2], words[3] == 'true')
+            print(f'REMOTE {reply}', flush=True)
+    executor.shutdown(timeout_sec=5)
+    for node in [*nodes.values(), client_node]:
+        node.destroy_node()
+    rclpy.shutdown()
+
+
+if __name__ == '__main__':
+    main()

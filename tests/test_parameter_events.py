@@ -1,0 +1,341 @@
+"""The filtered ParameterEventHandler against parameter events published by another process."""
+
+import time
+
+import pytest
+from rclpy.parameter_event_handler import ParameterEventHandler as RclpyParameterEventHandler
+
+import cft_action.parameter_events
+from cft_action import ContentFilterError, guard, is_filtered
+from cft_action.parameter_events import (ALL_NODES, NO_NODES, ParameterEventHandler,
+                                         node_filter)
+from tests.support import ChildProcess, unique_name
+
+BURST = 20
+SYNC_TIMEOUT = 15.0
+
+
+class Recorder:
+    """Parameter callbacks that record, per node, the values they were called with."""
+
+    def __init__(self, handler, parameter='value'):
+        self.handler = handler
+        self.parameter = parameter
+        self.values = {}
+        self.handles = {}
+
+    def watch(self, node_name):
+        self.values.setdefault(node_name, [])
+        self.handles[node_name] = self.handler.add_parameter_callback(
+            self.parameter, node_name,
+            lambda p, n=node_name: self.values[n].append(p.value.integer_value))
+        return self.handles[node_name]
+
+    def unwatch(self, node_name):
+        self.handler.remove_parameter_callback(self.handles.pop(node_name))
+
+
+@pytest.fixture
+def prefix():
+    return '/' + unique_name('cft_pe')
+
+
+@pytest.fixture
+def start_nodes():
+    """Start param_nodes.py with the given node names; stops every process it started.
+
+    The nodes run under the guard: every filter change is an event at each of their
+    /parameter_events writers, and the tests publish right after changes (to sync), which is when
+    an unguarded Fast DDS 2.14 writer can crash (NOTES.md section 4; tests/test_guard.py covers
+    that hazard itself).
+    """
+    children = []
+
+    def start(*names):
+        child = ChildProcess('param_nodes.py', names, env=guard.environment())
+        children.append(child)
+        return child
+
+    yield start
+    for child in children:
+        alive = child.proc.poll() is None
+        child.stop()
+        assert alive, f'param_nodes.py died: {child.stderr_lines[-20:]}'
+
+
+def sync(ros, handler, child, names, timeout=SYNC_TIMEOUT):
+    """Return once an event of each of ``names`` got through the current filter.
+
+    A filter change reaches the publishers by discovery, and until then they apply the previous
+    one. Each name must already be watched; a ``sync`` parameter callback on it does not change
+    the filter, and its first call proves that the node's writer has the current filter.
+    """
+    seen = set()
+    handles = [handler.add_parameter_callback('sync', n, lambda p, n=n: seen.add(n))
+               for n in names]
+    updates = handler.parameter_event_filter_state.updates
+    try:
+        deadline = time.monotonic() + timeout
+        while seen != set(names) and time.monotonic() < deadline:
+            for name in set(names) - seen:
+                child.request(f'set {name} sync 1', 'SET')
+            ros.spin_until(lambda: seen == set(names), timeout=0.3)
+        assert seen == set(names), f'no event from {set(names) - seen} within {timeout} s'
+    finally:
+        for handle in handles:
+            handler.remove_parameter_callback(handle)
+    assert handler.parameter_event_filter_state.updates == updates, 'sync changed the filter'
+
+
+def until_nodes(ros, handler, child, events, nodes, timeout=SYNC_TIMEOUT):
+    """Burst until the events that arrive come from exactly ``nodes``: the new filter is in force.
+
+    Used where a filter change adds no node to sync on, or removes one.
+    """
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        events.clear()
+        burst(ros, handler, child, count=3, expected=3 * len(nodes), settle=0.3)
+        if sorted(set(events)) == sorted(nodes):
+            return
+    pytest.fail(f'events still came from {sorted(set(events))}, not {sorted(nodes)}')
+
+
+def burst(ros, handler, child, count=BURST, expected=0, settle=1.0):
+    """Publish ``count`` changes of ``value`` on every node; return the events received."""
+    before = handler.parameter_event_filter_state.events_received
+    child.request(f'burst {count}', 'BURST', timeout=60)
+    ros.spin_until(
+        lambda: handler.parameter_event_filter_state.events_received - before >= expected, 15)
+    ros.spin_for(settle)  # anything that should not arrive has had its chance
+    return handler.parameter_event_filter_state.events_received - before
+
+
+def test_is_a_drop_in(ros):
+    handler = ParameterEventHandler(ros.node)
+    assert isinstance(handler, RclpyParameterEventHandler)
+    assert is_filtered(handler.parameter_event_subscription)
+    state = handler.parameter_event_filter_state
+    assert (state.mode, state.active, state.expression, state.updates) == \
+        ('nodes', True, NO_NODES, 0)
+    assert handler.get_parameter_event_filter() == (NO_NODES, [])
+    handler.destroy()
+    assert handler.parameter_event_filter_state.mode == 'off'
+    assert handler.get_parameter_event_filter() == ('', [])
+
+
+def test_callbacks_fire_for_watched_nodes_only_and_miss_nothing(ros, start_nodes, prefix):
+    watched = [f'{prefix}/a', f'{prefix}/ns/b']
+    unwatched = [f'{prefix}/c', f'{prefix}/d', f'{prefix}/ns/e']
+    child = start_nodes(*watched, *unwatched)
+    handler = ParameterEventHandler(ros.node)
+    recorder = Recorder(handler)
+    for name in watched:
+        recorder.watch(name)
+    assert child.request('matched 1', 'MATCHED') == 'MATCHED'
+    sync(ros, handler, child, watched)
+
+    received = burst(ros, handler, child, expected=len(watched) * BURST)
+
+    for name in watched:
+        assert recorder.values[name] == list(range(1, BURST + 1)), name
+    # The unwatched nodes' events never reached this process: filtered by their writers.
+    assert received == len(watched) * BURST
+    state = handler.parameter_event_filter_state
+    assert state.watched_nodes == tuple(sorted(watched))
+    assert state.updates == 2
+
+
+def test_adding_and_removing_callbacks_grows_and_shrinks_the_filter(ros, start_nodes, prefix):
+    a, b, c = f'{prefix}/a', f'{prefix}/b', f'{prefix}/c'
+    child = start_nodes(a, b, c)
+    handler = ParameterEventHandler(ros.node)
+    recorder = Recorder(handler)
+    assert child.request('matched 1', 'MATCHED') == 'MATCHED'
+
+    recorder.watch(a)
+    assert handler.get_parameter_event_filter() == ('node = %0', [f"'{a}'"])
+    recorder.watch(b)
+    state = handler.parameter_event_filter_state
+    assert (state.expression, state.expression_parameters) == \
+        ('node = %0 OR node = %1', (f"'{a}'", f"'{b}'"))
+    assert handler.get_parameter_event_filter() == (state.expression,
+                                                    list(state.expression_parameters))
+    assert state.updates == 2
+    # A second callback on a watched node, for another parameter, changes nothing.
+    extra = handler.add_parameter_callback('other', a, lambda p: None)
+    assert handler.parameter_event_filter_state.updates == 2
+    sync(ros, handler, child, [a, b])
+    assert burst(ros, handler, child, expected=2 * BURST) == 2 * BURST
+    assert recorder.values[b] == list(range(1, BURST + 1))
+
+    # Shrink: b leaves the filter. Adding c right after proves, once c's events arrive, that the
+    # writers (all in one participant) have the newer filter, which has no b either.
+    recorder.unwatch(b)
+    assert handler.get_parameter_event_filter() == ('node = %0', [f"'{a}'"])
+    recorder.watch(c)
+    sync(ros, handler, child, [a, c])
+    recorder.values[b].clear()
+    assert burst(ros, handler, child, expected=2 * BURST) == 2 * BURST
+    assert recorder.values[b] == []
+    assert recorder.values[c] == list(range(1, BURST + 1))
+    assert handler.parameter_event_filter_state.updates == 4
+
+    handler.remove_parameter_callback(extra)
+    recorder.unwatch(a)
+    recorder.unwatch(c)
+    state = handler.parameter_event_filter_state
+    assert (state.expression, state.watched_nodes, state.updates) == (NO_NODES, (), 6)
+    assert handler.get_parameter_event_filter() == (NO_NODES, [])
+
+
+def test_node_names_that_need_quoting(ros, start_nodes, prefix):
+    # Slashes, and names that are DDS-SQL keywords: only a quoted literal compares them right.
+    tricky = f'{prefix}/OR/AND'
+    other = f'{prefix}/TRUE/x_1/LIKE'
+    child = start_nodes(tricky, other, f'{prefix}/OR/NOT')
+    handler = ParameterEventHandler(ros.node)
+    recorder = Recorder(handler)
+    # A relative name resolves against the handler node's namespace, as in rclpy: here '/'.
+    recorder.watch(tricky)
+    relative = handler.add_parameter_callback(
+        'value', other.lstrip('/'), lambda p: recorder.values[other].append(
+            p.value.integer_value))
+    recorder.values[other] = []
+    assert relative.node_name == other
+    options = handler.get_parameter_event_filter()
+    assert options.expression_parameters == sorted([f"'{tricky}'", f"'{other}'"])
+    assert child.request('matched 1', 'MATCHED') == 'MATCHED'
+    sync(ros, handler, child, [tricky, other])
+    assert burst(ros, handler, child, expected=2 * BURST) == 2 * BURST
+    assert recorder.values[tricky] == recorder.values[other] == list(range(1, BURST + 1))
+
+
+def test_unquotable_node_name_is_left_out_of_the_filter(ros):
+    handler = ParameterEventHandler(ros.node)
+    handle = handler.add_parameter_callback('p', "/it's", lambda p: None)
+    state = handler.parameter_event_filter_state
+    assert (state.expression, state.updates, state.watched_nodes) == (NO_NODES, 0, ("/it's",))
+    handler.remove_parameter_callback(handle)
+    with pytest.raises(RuntimeError):  # as rclpy: an unknown handle
+        handler.remove_parameter_callback(handle)
+
+
+def test_more_nodes_than_expression_parameters(ros):
+    names = [f'/n{i:03d}' for i in range(120)]
+    expression, parameters = node_filter(names)
+    assert parameters == [] and expression.startswith("node = '/n000' OR node = '/n001'")
+    handler = ParameterEventHandler(ros.node)
+    for name in names:
+        handler.add_parameter_callback('p', name, lambda p: None)
+    assert handler.get_parameter_event_filter() == (expression, [])
+    assert handler.parameter_event_filter_state.updates == 120
+
+
+def test_user_expression_with_syntax_error_raises_naming_it(ros, start_nodes, prefix):
+    a = f'{prefix}/a'
+    child = start_nodes(a)
+    handler = ParameterEventHandler(ros.node)
+    recorder = Recorder(handler)
+    recorder.watch(a)
+    before = handler.parameter_event_filter_state
+
+    with pytest.raises(ContentFilterError) as info:
+        handler.set_parameter_event_filter('node = = %0', [a])
+    assert "'node = = %0'" in str(info.value)
+    assert "stays 'node = %0'" in str(info.value)
+    with pytest.raises(ContentFilterError, match="'nodes = %0'"):
+        handler.set_parameter_event_filter('nodes = %0', [a])  # no such field
+    with pytest.raises(ContentFilterError, match="'node = %0'.*quote"):
+        handler.set_parameter_event_filter('node = %0', ["/it's"])
+
+    # The previous filter stays, and still works.
+    assert handler.parameter_event_filter_state == before
+    assert handler.get_parameter_event_filter() == ('node = %0', [f"'{a}'"])
+    assert child.request('matched 1', 'MATCHED') == 'MATCHED'
+    sync(ros, handler, child, [a])
+    assert burst(ros, handler, child, expected=BURST) == BURST
+    assert recorder.values[a] == list(range(1, BURST + 1))
+
+
+def test_user_expression_and_event_callbacks(ros, start_nodes, prefix):
+    a, b, c = f'{prefix}/a', f'{prefix}/b', f'{prefix}/c'
+    child = start_nodes(a, b, c)
+    handler = ParameterEventHandler(ros.node)
+    recorder = Recorder(handler)
+    recorder.watch(a)
+    events = []
+
+    # A node-agnostic event callback needs everything: unfiltered, and the state says why.
+    handle = handler.add_parameter_event_callback(lambda e: events.append(e.node))
+    state = handler.parameter_event_filter_state
+    assert (state.mode, state.active, state.expression) == ('all', False, '')
+    assert 'add_parameter_event_callback' in state.reason
+    assert handler.get_parameter_event_filter() == (ALL_NODES, [])
+    assert child.request('matched 1', 'MATCHED') == 'MATCHED'
+    until_nodes(ros, handler, child, events, [a, b, c])
+    events.clear()
+    burst(ros, handler, child, expected=3 * BURST)
+    assert sorted(set(events)) == [a, b, c] and len(events) == 3 * BURST
+
+    # A user expression, bare names quoted automatically; it wins over the event callback.
+    handler.set_parameter_event_filter('node = %0 OR node = %1', [a, c])
+    assert handler.get_parameter_event_filter() == ('node = %0 OR node = %1',
+                                                    [f"'{a}'", f"'{c}'"])
+    state = handler.parameter_event_filter_state
+    assert (state.mode, state.active, state.expression) == ('user', True, 'node = %0 OR node = %1')
+    # Watching b now does not change a user filter.
+    recorder.watch(b)
+    assert handler.parameter_event_filter_state.updates == state.updates
+    until_nodes(ros, handler, child, events, [a, c])
+    events.clear()
+    burst(ros, handler, child, expected=2 * BURST)
+    assert sorted(set(events)) == [a, c] and len(events) == 2 * BURST
+
+    # Clearing it hands the filter back to the handler: all nodes while the event callback lives.
+    handler.set_parameter_event_filter('')
+    assert handler.parameter_event_filter_state.mode == 'all'
+    handler.remove_parameter_event_callback(handle)
+    state = handler.parameter_event_filter_state
+    assert (state.mode, state.active) == ('nodes', True)
+    assert handler.get_parameter_event_filter() == ('node = %0 OR node = %1',
+                                                    [f"'{a}'", f"'{b}'"])
+
+
+def test_use_sim_time_still_flips_the_clock(ros, start_nodes, prefix):
+    a = f'{prefix}/a'
+    child = start_nodes(a)
+    me = ros.node.get_fully_qualified_name()
+    watching_other = ParameterEventHandler(ros.node)
+    Recorder(watching_other).watch(a)
+    watching_me = ParameterEventHandler(ros.node)
+    seen = []
+    watching_me.add_parameter_callback('use_sim_time', me,
+                                       lambda p: seen.append(p.value.bool_value))
+    clock = ros.node.get_clock()
+    assert not clock.ros_time_is_active
+
+    for value in (True, False):
+        child.send(f'remote {me} use_sim_time {"true" if value else "false"}')
+        # Spin: our parameter service must answer the other process.
+        assert ros.spin_until(lambda: clock.ros_time_is_active == value, timeout=20), \
+            f'use_sim_time={value} did not reach the clock'
+        assert child.expect('REMOTE', timeout=20) == 'REMOTE OK'
+        assert ros.spin_until(lambda: len(seen) >= (1 if value else 2), timeout=5)
+    assert seen == [True, False]
+    # The handler that watches another node did not receive this node's events.
+    assert watching_other.parameter_event_filter_state.events_received == 0
+
+
+def test_falls_back_when_the_rmw_has_no_content_filter(ros, monkeypatch):
+    monkeypatch.setattr(cft_action.parameter_events, 'is_content_filter_supported',
+                        lambda node: False)
+    handler = ParameterEventHandler(ros.node)
+    handler.add_parameter_callback('p', '/x', lambda p: None)
+    state = handler.parameter_event_filter_state
+    assert (state.mode, state.active, state.updates) == ('off', False, 0)
+    assert 'no content filter' in state.reason
+    assert not is_filtered(handler.parameter_event_subscription)
+    assert handler.get_parameter_event_filter() == ('', [])
+    with pytest.raises(ContentFilterError, match='no content filter'):
+        handler.set_parameter_event_filter('node = %0', ['/x'])
