@@ -23,7 +23,9 @@ NEVER_MATCH = f'{GOAL_UUID_FIELD}[0] = 0 AND {GOAL_UUID_FIELD}[0] = 1'
 MATCH_ALL = f'{GOAL_UUID_FIELD}[0] = {GOAL_UUID_FIELD}[0]'
 
 _QUOTES = ("'", '`')
-_NUMBER = re.compile(r'[+-]?(0[xX][0-9a-fA-F]+|(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?)')
+# Fast DDS opens a string with ' or a backtick, closes it with ', and wants digits on both sides
+# of a decimal point (measured: `hello` and .5 and 5. are parse errors, `hello' is not).
+_NUMBER = re.compile(r'[+-]?(0[xX][0-9a-fA-F]+|\d+(\.\d+)?([eE][+-]?\d+)?)')
 _BOOLEANS = ('TRUE', 'FALSE')
 
 Literal = Union[str, bool, int, float]
@@ -33,8 +35,9 @@ def dds_literal(value: Literal) -> str:
     """Return ``value`` as a DDS-SQL literal that Fast DDS accepts as an expression parameter.
 
     - ``bool`` becomes ``TRUE`` or ``FALSE``; ``int`` and finite ``float`` become numbers.
-    - A string that already is a literal passes through unchanged: quoted with ``'`` or a backtick,
-      a number (integer, float or hex, optionally signed), ``TRUE`` or ``FALSE``.
+    - A string that already is a literal passes through unchanged: quoted (opened with ``'`` or a
+      backtick, closed with ``'``), a number (integer, float or hex, optionally signed), ``TRUE``
+      or ``FALSE``. Note that Fast DDS reads a leading ``0`` as octal: ``010`` is 8.
     - Any other string is a bare string and is wrapped in single quotes; ``''`` for the empty one.
 
     :raises ValueError: if the value cannot be written as a DDS literal: a non-finite float, or a
@@ -51,7 +54,7 @@ def dds_literal(value: Literal) -> str:
         return repr(value)
     if not isinstance(value, str):
         raise TypeError(f'cannot make a DDS literal of {type(value).__name__} {value!r}')
-    if len(value) >= 2 and value[0] in _QUOTES and value[-1] == value[0]:
+    if len(value) >= 2 and value[0] in _QUOTES and value[-1] == "'":
         inner = value[1:-1]
         if any(q in inner for q in _QUOTES):
             raise ValueError(f'{value!r}: a quote inside a quoted DDS string cannot be escaped')

@@ -29,7 +29,7 @@ from rclpy.subscription import Subscription
 from rclpy.type_support import check_is_valid_msg_type
 from rosidl_parser.definition import AbstractString, Array, BasicType, NamespacedType
 
-from cft_action import _rcl
+from cft_action import _rcl, sql
 from cft_action._rcl import ContentFilterError
 from cft_action.filters import dds_literals, Literal, never_match_on
 
@@ -77,6 +77,12 @@ def _apply(subscription_ptr: int, topic: str, expression: str,
         raise ContentFilterError(
             f'content filter {expression!r} on {topic}: bad expression parameter: {e}') from e
     described = f'content filter {expression!r} with parameters {parameters} on {topic}'
+    try:
+        # Fast DDS terminates the process on a LIKE or MATCH pattern its regex engine rejects,
+        # so what reaches it must first pass the checks of cft_action.sql.
+        sql.compile_filter(expression, parameters)
+    except sql.FilterError as e:
+        raise ContentFilterError(f'{described} was rejected: {e.reason}') from e
     with _rcl_lock:
         try:
             _rcl.set_content_filter(subscription_ptr, expression, parameters)
@@ -103,8 +109,8 @@ def _comparable_field(msg_type, prefix: str = '') -> Optional[str]:
     return None
 
 
-def _validate_on_probe(node: Node, msg_type, qos_profile: QoSProfile, expression: str,
-                       expression_parameters: Sequence[Literal]) -> None:
+def _validate_on_probe(node: Node, msg_type, qos_profile: QoSProfile, topic: str,
+                       expression: str, expression_parameters: Sequence[Literal]) -> None:
     """Let Fast DDS check ``expression`` on a throwaway reader of a private topic.
 
     rmw_fastrtps destroys the DataReader before it creates the content-filtered topic, and when
@@ -116,12 +122,13 @@ def _validate_on_probe(node: Node, msg_type, qos_profile: QoSProfile, expression
     field = _comparable_field(msg_type)
     if field is None:
         return  # no primitive field to build a first filter on: the real call reports errors
-    topic = f'/_cft_action_probe/t{uuid.uuid4().hex}'
+    probe_topic = f'/_cft_action_probe/t{uuid.uuid4().hex}'
     with node.handle:
-        probe = _rclpy.Subscription(node.handle, msg_type, topic, qos_profile.get_c_qos_profile())
+        probe = _rclpy.Subscription(node.handle, msg_type, probe_topic,
+                                    qos_profile.get_c_qos_profile())
     try:
         with probe:
-            _apply(probe.pointer, topic, never_match_on(field), ())
+            _apply(probe.pointer, probe_topic, never_match_on(field), ())
             _apply(probe.pointer, topic, expression, expression_parameters)
     finally:
         probe.destroy_when_not_in_use()
@@ -190,7 +197,8 @@ def create_filtered_subscription(
     _declare_qos_parameters(Subscription, node, final_topic, qos_profile,
                             qos_overriding_options or QoSOverridingOptions([]))
     check_is_valid_msg_type(msg_type)
-    _validate_on_probe(node, msg_type, qos_profile, filter_expression, expression_parameters)
+    _validate_on_probe(node, msg_type, qos_profile, final_topic, filter_expression,
+                       expression_parameters)
     with node.handle:
         subscription_object = _rclpy.Subscription(
             node.handle, msg_type, topic, qos_profile.get_c_qos_profile())

@@ -78,9 +78,9 @@ def test_bad_expression_raises_and_leaves_no_subscription(ros, publisher):
     with pytest.raises(ContentFilterError) as info:
         collect(ros, Int32, f'{prefix}/ints', 'data > > 3')
     assert "'data > > 3'" in str(info.value)
-    assert info.value.rcl_error  # rcl's own error string is carried
-    with pytest.raises(ContentFilterError, match='no_such_field'):
+    with pytest.raises(ContentFilterError, match='no_such_field') as info:
         collect(ros, Int32, f'{prefix}/ints', 'no_such_field = 3')
+    assert info.value.rcl_error  # what only Fast DDS finds carries rcl's own error string
     assert len(list(ros.node.subscriptions)) == before
     assert ros.node.count_subscribers(f'{prefix}/ints') == 0
 
@@ -228,3 +228,20 @@ def check_lost_counts(ros, prefix, child, capfd):
             assert lost == []
         ros.node.destroy_subscription(subscription)
         assert child.request('wait ints 0', 'MATCHED') == 'MATCHED'
+
+
+def test_regex_pattern_that_would_abort_fast_dds_is_refused(ros, publisher):
+    """Fast DDS calls std::terminate on an invalid LIKE pattern; it must never get one."""
+    prefix, _ = publisher
+    with pytest.raises(ContentFilterError, match=r"unbalanced '\('"):
+        collect(ros, String, f'{prefix}/strings', 'data LIKE %0', ['(abc'])
+    subscription, _ = collect(ros, String, f'{prefix}/strings', 'data LIKE %0', ['hello%'])
+    with pytest.raises(ContentFilterError, match=r"unterminated '\['"):
+        set_content_filter(subscription, "data LIKE 'a[b'")
+
+
+def test_errors_name_the_users_topic_not_the_probe(ros, publisher):
+    prefix, _ = publisher
+    with pytest.raises(ContentFilterError) as info:
+        collect(ros, Int32, f'{prefix}/ints', 'no_such_field = 3')
+    assert f'{prefix}/ints' in str(info.value) and '_cft_action_probe' not in str(info.value)

@@ -10,7 +10,7 @@ from cft_action.filters import (any_of, dds_literal, goal_filter_expression, nev
     # the eight cases of seed 002
     ('hello', "'hello'"),                # bare string: quoted
     ("'hello'", "'hello'"),              # already quoted: unchanged
-    ('`hello`', '`hello`'),              # backtick-quoted: unchanged
+    ("`hello'", "`hello'"),              # backtick-quoted (Fast DDS closes with '): unchanged
     ('TRUE', 'TRUE'),                    # boolean
     ('42', '42'),                        # integer
     ('-3.5e2', '-3.5e2'),                # float
@@ -20,6 +20,7 @@ from cft_action.filters import (any_of, dds_literal, goal_filter_expression, nev
     (True, 'TRUE'), (False, 'FALSE'), (7, '7'), (-7, '-7'), (2.5, '2.5'),
     # near misses of the literal forms are bare strings
     ('12abc', "'12abc'"), ('true', "'true'"), ('0x', "'0x'"), ('hello world', "'hello world'"),
+    ('.5', "'.5'"), ('5.', "'5.'"),      # Fast DDS rejects both as numbers
     # non-ASCII passes through inside the quotes
     ('héllo ✓', "'héllo ✓'"),
     ("'日本'", "'日本'"),
@@ -28,7 +29,7 @@ def test_dds_literal(value, literal):
     assert dds_literal(value) == literal
 
 
-@pytest.mark.parametrize('value', ["it's", 'back`tick', "'a'b'", "`x'`"])
+@pytest.mark.parametrize('value', ["it's", 'back`tick', "'a'b'", '`hello`'])
 def test_embedded_quotes_cannot_be_quoted(value):
     with pytest.raises(ValueError, match='quote'):
         dds_literal(value)
