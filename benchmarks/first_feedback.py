@@ -1,0 +1,134 @@
+"""Does feedback published in the first line of ``execute`` arrive? One client, several designs.
+
+A server that reports progress at once publishes its first feedback before the client has even
+received the goal response. A filter that learns of a goal only on acceptance (the upstream design)
+filters that feedback out; one that knows the goal before the request is sent does not, as long as
+the filter change reaches the server's writer before the goal request does.
+
+For each configuration (``client``, ``goals``, ``upstream``, ``rclpy``), one client sends GOALS goals
+of ORDER feedback messages to a guarded server (``demos/_server.py``), either one after another or
+all at once, and counts the goals whose first feedback, and whose every feedback, arrived::
+
+    python benchmarks/first_feedback.py --goals 200 --order 3
+
+Results go to ``benchmarks/results/first-feedback-<date>-<host>.json``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import os
+import platform
+import random
+import sys
+import time
+from pathlib import Path
+from typing import Any
+
+REPO = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(REPO))
+
+import rclpy  # noqa: E402
+from rclpy.executors import SingleThreadedExecutor  # noqa: E402
+from rclpy.node import Node  # noqa: E402
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
+from test_msgs.action import Fibonacci  # noqa: E402
+
+from cft_action import guard  # noqa: E402
+from demos import _client, _harness  # noqa: E402
+
+CONFIGS = ('client', 'goals', 'upstream', 'rclpy')
+QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
+                 reliability=ReliabilityPolicy.RELIABLE)
+
+
+def spin_until(executor: SingleThreadedExecutor, done, timeout: float) -> bool:
+    deadline = time.monotonic() + timeout
+    while not done() and time.monotonic() < deadline:
+        executor.spin_once(timeout_sec=0.01)
+    return done()
+
+
+def run_config(config: str, action: str, goals: int, order: int, burst: bool) -> dict[str, Any]:
+    """One client of ``config`` sends the goals and reports what arrived."""
+    node = Node(f'first_feedback_{config}')
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    client = _client.make_client(node, config, action, QOS)
+    try:
+        if not _client.probe(node, executor, client, 20):
+            raise SystemExit(f'{config}: the server did not answer')
+        received: dict[int, list[int]] = {}
+        results = []
+
+        def send(index: int) -> None:
+            received[index] = []
+            future = client.send_goal_async(
+                Fibonacci.Goal(order=order),
+                feedback_callback=lambda m: received[index].append(m.feedback.sequence[0]))
+            future.add_done_callback(lambda f: results.append(f.result().get_result_async()))
+
+        for index in range(goals):
+            send(index)
+            if not burst:
+                spin_until(executor, lambda: len(results) > index and results[index].done(), 20)
+        spin_until(executor, lambda: len(results) == goals and all(r.done() for r in results), 60)
+        spin_until(executor, lambda: False, 1.0)  # stragglers
+        counters = _client.filter_counters(client)
+        return {
+            'config': config, 'goals': goals, 'order': order, 'burst': burst,
+            'first_arrived': sum(1 for ks in received.values() if 0 in ks),
+            'complete': sum(1 for ks in received.values() if sorted(ks) == list(range(order))),
+            'filter_events': counters['updates'],
+            'counters': counters,
+        }
+    finally:
+        client.destroy()
+        executor.shutdown(timeout_sec=2)
+        node.destroy_node()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('--goals', type=int, default=200)
+    parser.add_argument('--order', type=int, default=3, help='feedback messages per goal')
+    parser.add_argument('--period', type=float, default=0.01, help='feedback period, s')
+    parser.add_argument('--configs', default=','.join(CONFIGS))
+    args = parser.parse_args()
+    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 101)))
+    os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
+    rclpy.init()
+    action = f'/first_feedback_{random.randrange(1 << 32):08x}'
+    server = _harness.Process(
+        [sys.executable, '-u', str(REPO / 'demos' / '_server.py'), action, str(args.period), '0',
+         '1000'], guard.environment(), 'server')
+    rows = []
+    try:
+        server.expect('READY', 30)
+        for burst in (False, True):
+            for config in args.configs.split(','):
+                print(f'{config} {"burst" if burst else "one at a time"} ...', flush=True)
+                rows.append(run_config(config, action, args.goals, args.order, burst))
+    finally:
+        server.stop()
+        rclpy.shutdown()
+    print(f'\n{args.goals} goals, {args.order} feedback each, the first in the first line of '
+          f'execute, {args.period * 1000:.0f} ms apart')
+    print(f'{"config":<10} {"sending":<14} {"first arrived":>14} {"complete":>9} {"filter events":>14}')
+    for row in rows:
+        print(f'{row["config"]:<10} {"burst" if row["burst"] else "one at a time":<14} '
+              f'{row["first_arrived"]:>14} {row["complete"]:>9} {row["filter_events"]:>14}')
+    now = datetime.datetime.now(datetime.timezone.utc)
+    out = REPO / 'benchmarks' / 'results' / \
+        f'first-feedback-{now:%Y-%m-%d}-{platform.node()}.json'
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps({'date': now.isoformat(), 'host': platform.node(),
+                               'machine': _harness.environment_facts(), 'args': vars(args),
+                               'load_average': os.getloadavg(), 'rows': rows}, indent=1))
+    print(f'\nresults: {out}')
+
+
+if __name__ == '__main__':
+    main()
