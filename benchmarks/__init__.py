@@ -1,0 +1,1 @@
+"""Benchmarks of cft_action: ``sweep.py`` (``make bench``) and the upstream-equivalent client."""

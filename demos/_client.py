@@ -1,0 +1,257 @@
+"""A load client process: one action client that sends goals on command and accounts what arrives.
+
+Usage: ``_client.py ACTION CONFIG GOALS ORDER DEPTH``
+
+CONFIG is ``rclpy`` (plain :class:`rclpy.action.ActionClient`), ``client`` or ``goals``
+(:class:`cft_action.ActionClient` in that mode), or ``upstream`` (the emulation of the upstream
+design in ``benchmarks/_upstream.py``). Every queue is DEPTH deep.
+
+Before ``READY`` the client completes one goal of order 0 (no feedback): ``wait_for_server`` only
+sees the server in the graph, while this round trip proves that the endpoints matched.
+
+Commands on stdin, one per line:
+
+- ``go``: send GOALS goals of ORDER feedback messages each, with a feedback callback each.
+- ``progress``: reply ``PROGRESS <json>`` with the counters so far.
+- ``report``: reply ``RESULT <json>`` with everything measured since ``go``.
+- ``quit`` (or end of input): exit.
+
+What it counts, from ``go`` on:
+
+- ``own`` and ``foreign``: feedback messages taken from rcl, split by whether the goal is one of
+  this client's. They are counted in ``take_data``, below every filter, so a message that rmw or the
+  writer filtered out is not counted and one that rclpy drops later is.
+- ``callbacks``: feedback that reached a user callback, with ``latency_us`` from the server's
+  publish time in the message to the callback.
+- ``cpu_s``: user + system seconds of this process, all threads.
+- ``updates``: filter changes (``client``/``goals``: ``feedback_filter_state.updates``;
+  ``upstream``: every ``set_content_filter`` call, with ``recreations`` of the DataReader).
+
+The client never asks for results: rclpy drops a goal's feedback callback as soon as its result
+arrives, which would hide from the callbacks and the latency the own feedback still queued behind
+the result in a client that cannot keep up. Goal completion comes from the status topic instead.
+"""
+
+from __future__ import annotations
+
+import json
+import queue
+import resource
+import sys
+import threading
+import time
+import uuid
+from pathlib import Path
+from typing import Any, Callable
+
+import rclpy
+from action_msgs.msg import GoalStatus
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from test_msgs.action import Fibonacci
+from unique_identifier_msgs.msg import UUID
+
+# Run as a script: make the repository importable for the upstream emulation.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+CONFIGS = ('rclpy', 'client', 'goals', 'upstream')
+
+_TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
+                       GoalStatus.STATUS_ABORTED})
+
+
+class CountingMixin:
+    """Counts feedback taken from rcl, own and foreign, in ``take_data``."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        """Set up the counters, then construct the action client with all arguments."""
+        self.own_uuids: set[bytes] = set()
+        self.own_taken = 0
+        self.foreign_taken = 0
+        super().__init__(*args, **kwargs)
+
+    def take_data(self) -> dict:
+        """Take as the base class does, and count the feedback message if one was taken."""
+        data = super().take_data()
+        feedback = data.get('feedback')
+        if feedback is not None:
+            if bytes(feedback.goal_id.uuid) in self.own_uuids:
+                self.own_taken += 1
+            else:
+                self.foreign_taken += 1
+        return data
+
+
+def make_client(node: Node, config: str, action: str, qos: QoSProfile) -> Any:
+    """Create the action client of ``config``, with the counting mixin on top."""
+    if config == 'rclpy':
+        from rclpy.action import ActionClient as base
+        kwargs: dict[str, Any] = {}
+    elif config == 'upstream':
+        from benchmarks._upstream import UpstreamEquivalentActionClient as base
+        kwargs = {}
+    elif config in ('client', 'goals'):
+        from cft_action import ActionClient as base
+        kwargs = {'feedback_filter': config}
+    else:
+        raise SystemExit(f'unknown configuration {config!r}; expected one of {CONFIGS}')
+    counting = type(f'Counting{base.__name__}', (CountingMixin, base), {})
+    return counting(node, Fibonacci, action, goal_service_qos_profile=qos,
+                    result_service_qos_profile=qos, cancel_service_qos_profile=qos,
+                    feedback_sub_qos_profile=qos, **kwargs)
+
+
+def filter_counters(client: Any) -> dict[str, Any]:
+    """The filter's counters, whatever the configuration."""
+    state = getattr(client, 'feedback_filter_state', None)
+    if state is not None:
+        return {'updates': state.updates, 'active': state.active, 'reason': state.reason,
+                'lib_taken': state.feedback_taken, 'lib_dropped': state.feedback_dropped}
+    if hasattr(client, 'filter_sets'):
+        return {'updates': client.filter_sets, 'recreations': client.recreations,
+                'active': not client.disabled_reason, 'reason': client.disabled_reason}
+    return {'updates': 0, 'active': False, 'reason': 'plain rclpy'}
+
+
+def cpu_seconds() -> float:
+    """User + system seconds of this process, all threads."""
+    usage = resource.getrusage(resource.RUSAGE_SELF)
+    return usage.ru_utime + usage.ru_stime
+
+
+class LoadClient:
+    """Sends the goals and keeps the counters; everything runs in the executor's thread."""
+
+    def __init__(self, node: Node, client: Any, goals: int, order: int) -> None:
+        self.node = node
+        self.client = client
+        self.goals = goals
+        self.order = order
+        self.handles: list[Any] = []  # strong references: rclpy tracks status through weakrefs
+        self.rejected = 0
+        self.callbacks = 0
+        self.misrouted = 0
+        self.latency_us: list[int] = []
+        self.start_cpu = 0.0
+        self.start_counters: dict[str, Any] = {}
+        self.started = 0.0
+
+    def on_feedback_for(self, goal_uuid: bytes) -> Callable[[Any], None]:
+        """The feedback callback of one goal: latency from the server's stamp, and routing."""
+        def on_feedback(msg: Any) -> None:
+            now = time.time_ns()
+            sequence = msg.feedback.sequence
+            self.latency_us.append((now - sequence[1] * 1_000_000_000 - sequence[2]) // 1000)
+            self.callbacks += 1
+            if bytes(msg.goal_id.uuid) != goal_uuid:
+                self.misrouted += 1
+        return on_feedback
+
+    def go(self, executor: SingleThreadedExecutor) -> None:
+        """Send all goals, spinning in between so that responses do not pile up."""
+        self.start_cpu = cpu_seconds()
+        self.start_counters = filter_counters(self.client)
+        self.started = time.monotonic()
+        for _ in range(self.goals):
+            new_uuid = getattr(self.client, 'new_goal_uuid', None)
+            goal_uuid = new_uuid() if new_uuid else UUID(uuid=list(uuid.uuid4().bytes))
+            key = bytes(goal_uuid.uuid)
+            self.client.own_uuids.add(key)
+            future = self.client.send_goal_async(
+                Fibonacci.Goal(order=self.order), self.on_feedback_for(key), goal_uuid=goal_uuid)
+            future.add_done_callback(self._on_goal_response)
+            executor.spin_once(timeout_sec=0)
+
+    def _on_goal_response(self, future: Any) -> None:
+        handle = future.result()
+        if handle.accepted:
+            self.handles.append(handle)
+        else:
+            self.rejected += 1
+
+    def goals_done(self) -> int:
+        """Goals that reached a terminal status, or were rejected."""
+        return self.rejected + sum(h.status in _TERMINAL for h in self.handles)
+
+    def progress(self) -> dict[str, Any]:
+        """The counters that tell the orchestrator whether data is still arriving."""
+        return {'own': self.client.own_taken, 'foreign': self.client.foreign_taken,
+                'callbacks': self.callbacks, 'goals_done': self.goals_done()}
+
+    def report(self) -> dict[str, Any]:
+        """Everything measured since ``go``."""
+        counters = filter_counters(self.client)
+        for key in ('updates', 'recreations', 'lib_taken', 'lib_dropped'):
+            if key in counters:
+                counters[key] -= self.start_counters.get(key, 0)
+        return {**self.progress(), 'goals': self.goals, 'order': self.order,
+                'accepted': len(self.handles), 'rejected': self.rejected,
+                'misrouted': self.misrouted, 'cpu_s': cpu_seconds() - self.start_cpu,
+                'latency_us': self.latency_us, **counters}
+
+
+def probe(node: Node, executor: SingleThreadedExecutor, client: Any, timeout: float) -> bool:
+    """Complete one goal of order 0, which proves that all endpoints matched."""
+    if not client.wait_for_server(timeout_sec=timeout):
+        return False
+    future = client.send_goal_async(Fibonacci.Goal(order=0))
+    executor.spin_until_future_complete(future, timeout_sec=timeout)
+    if not future.done():
+        return False
+    result = future.result().get_result_async()
+    executor.spin_until_future_complete(result, timeout_sec=timeout)
+    return result.done()
+
+
+def read_commands(commands: queue.Queue, wake: Any) -> None:
+    """Forward stdin lines to the executor's thread; end of input means ``quit``."""
+    for line in sys.stdin:
+        commands.put(line.strip())
+        wake.trigger()
+    commands.put('quit')
+    wake.trigger()
+
+
+def main() -> None:
+    """Run one load client until ``quit``."""
+    action, config = sys.argv[1], sys.argv[2]
+    goals, order, depth = int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
+    rclpy.init()
+    node = Node(f'cft_load_client_{uuid.uuid4().hex[:8]}')
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    qos = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
+    client = make_client(node, config, action, qos)
+    if not probe(node, executor, client, timeout=60):
+        print('NO SERVER', flush=True)
+        return
+    load = LoadClient(node, client, goals, order)
+    commands: queue.Queue[str] = queue.Queue()
+    # A command wakes the executor through a guard condition, so the client sleeps while nothing
+    # arrives: polling stdin between short spins cost 40 idle clients most of a core, which
+    # showed in their CPU figures and slowed the server. Commands run here, between spins, since
+    # ``go`` spins itself and spin_once must not be nested.
+    wake = node.create_guard_condition(lambda: None)
+    threading.Thread(target=read_commands, args=(commands, wake), daemon=True).start()
+    print('READY', flush=True)
+    running = True
+    while running:
+        executor.spin_once(timeout_sec=1.0)
+        while not commands.empty():
+            command = commands.get_nowait()
+            if command == 'go':
+                load.go(executor)
+            elif command == 'progress':
+                print('PROGRESS ' + json.dumps(load.progress()), flush=True)
+            elif command == 'report':
+                print('RESULT ' + json.dumps(load.report()), flush=True)
+            elif command == 'quit':
+                running = False
+    client.destroy()
+    node.destroy_node()
+    rclpy.shutdown()
+
+
+if __name__ == '__main__':
+    main()

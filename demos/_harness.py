@@ -1,0 +1,540 @@
+"""The load harness shared by ``make demo`` and ``make bench``: processes, phases and accounting.
+
+One run starts one action server (``_server.py``, under the server guard) and then, for each
+configuration in turn, N fresh client processes (``_client.py``) that each send M goals at once.
+A phase goes:
+
+1. start the clients; each proves with an order-0 goal that its endpoints matched (``READY``);
+2. snapshot the server's counters and every client's network counters; ``go`` to all clients;
+3. wait until the server has accepted and finished all N x M goals;
+4. wait until no client's counters move any more (a client that cannot keep up is still taking its
+   backlog), and at least :data:`SETTLE_S` (so that filter changes made after the goals finished,
+   such as ``goals`` mode shrinking its filter, are counted);
+5. snapshot the counters again, collect every client's ``RESULT`` and stop the clients.
+
+Bytes are the ``rx_bytes`` of each client's own network interface when network namespaces can be
+made (root, iproute2: see ``_netns.py``); otherwise they are estimated as feedback messages taken x
+the serialized size of one feedback message, and the result says so.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import os
+import platform
+import queue
+import random
+import statistics
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any, Callable, Optional, Sequence
+
+from demos import _netns
+
+HERE = Path(__file__).resolve().parent
+
+#: The configurations, in the order they run; ``rclpy`` (plain) first, since ratios refer to it.
+CONFIG_LABELS = {
+    'rclpy': 'plain rclpy',
+    'client': 'cft client mode',
+    'goals': 'cft goals mode',
+    'upstream': 'upstream-equivalent',
+}
+
+#: Seconds of quiet after the last goal finished before a phase is accounted: longer than
+#: cft_action's FINISHED_GOAL_GRACE (1 s), after which ``goals`` mode drops finished goals' terms.
+SETTLE_S = 2.5
+
+#: Memory one client may spend on queued feedback; bounds the queue depth for large messages.
+_QUEUE_BYTES = 256 * 1024 * 1024
+
+Progress = Callable[[str], None]
+
+
+@dataclasses.dataclass
+class LoadSpec:
+    """One load point.
+
+    :ivar clients: client processes (N).
+    :ivar goals: goals each client sends at once (M).
+    :ivar order: feedback messages per goal; a goal lasts ``order / rate_hz`` seconds.
+    :ivar rate_hz: feedback rate per goal.
+    :ivar pad: int32 elements added to each feedback message (0: small, 2500: 10 kB).
+    :ivar network: ``'auto'`` (namespaces when possible), ``'netns'`` or ``'count'``.
+    :ivar drain_timeout: seconds a phase may take after its goals finished, for slow clients.
+    :ivar goals_timeout: seconds the goals of a phase may take; None: 120 + 30 x their nominal
+        duration (a saturated machine runs them several times slower).
+    """
+
+    clients: int = 8
+    goals: int = 4
+    order: int = 1000
+    rate_hz: float = 100.0
+    pad: int = 0
+    network: str = 'auto'
+    drain_timeout: float = 300.0
+    goals_timeout: Optional[float] = None
+
+    @property
+    def total_goals(self) -> int:
+        """N x M."""
+        return self.clients * self.goals
+
+
+def feedback_size(pad: int) -> int:
+    """Serialized size (CDR, with its 4-byte header) of one feedback message with ``pad``."""
+    from rclpy.serialization import serialize_message
+    from test_msgs.action import Fibonacci
+    message = Fibonacci.Impl.FeedbackMessage()
+    message.feedback.sequence = [0] * (3 + pad)
+    return len(serialize_message(message))
+
+
+def queue_depth(spec: LoadSpec) -> int:
+    """The depth of every queue, on both sides.
+
+    rclpy's default of 10 drops goal requests, responses and feedback in bursts. A plain client may
+    fall behind by all the feedback of a phase (it takes every client's), so its queue holds all of
+    it, within :data:`_QUEUE_BYTES`: what overflows that is lost, and shows as own + foreign below
+    what the server published.
+    """
+    everything = spec.total_goals * spec.order + 100
+    return max(1000, min(everything, _QUEUE_BYTES // feedback_size(spec.pad)))
+
+
+# --- processes ------------------------------------------------------------------------------------
+
+class Process:
+    """A child process driven by lines on stdin and stdout, reaped with its resource usage."""
+
+    def __init__(self, argv: Sequence[str], env: dict[str, str], name: str) -> None:
+        """Start ``argv`` in a session of its own."""
+        self.name = name
+        self.lines: queue.Queue[str] = queue.Queue()
+        self.stderr: list[str] = []
+        self.seen: list[str] = []  # the last stdout lines, for error messages
+        self.cpu_lifetime_s: Optional[float] = None
+        self.proc = subprocess.Popen(list(argv), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                     stderr=subprocess.PIPE, text=True, env=env,
+                                     start_new_session=True)
+        threading.Thread(target=self._pump, args=(self.proc.stdout, self.lines.put),
+                         daemon=True).start()
+        threading.Thread(target=self._pump, args=(self.proc.stderr, self._keep_stderr),
+                         daemon=True).start()
+
+    @property
+    def pid(self) -> int:
+        """The process id (``ip netns exec`` execs, so it is the Python process's)."""
+        return self.proc.pid
+
+    @staticmethod
+    def _pump(stream: Any, sink: Callable[[str], None]) -> None:
+        for line in stream:
+            sink(line.rstrip('\n'))
+
+    def _keep_stderr(self, line: str) -> None:
+        self.stderr.append(line)
+        del self.stderr[:-50]
+
+    def expect(self, prefix: str, timeout: float) -> str:
+        """Return the next stdout line that starts with ``prefix``; fail after ``timeout`` s."""
+        deadline = time.monotonic() + timeout
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0 or (self.proc.poll() is not None and self.lines.empty()):
+                raise RuntimeError(
+                    f'{self.name}: no {prefix!r} within {timeout:.0f} s (exit {self.proc.poll()}); '
+                    f'stdout: {self.seen}; stderr: {self.stderr[-10:]}')
+            try:
+                line = self.lines.get(timeout=min(remaining, 0.2))
+            except queue.Empty:
+                continue
+            self.seen = self.seen[-9:] + [line]
+            if line.startswith(prefix):
+                return line
+
+    def send(self, line: str) -> None:
+        """Write one command line."""
+        self.proc.stdin.write(line + '\n')
+        self.proc.stdin.flush()
+
+    def request_json(self, command: str, reply: str, timeout: float = 30.0) -> dict[str, Any]:
+        """Send ``command`` and parse the JSON after ``reply`` in the answer."""
+        self.send(command)
+        return json.loads(self.expect(reply, timeout).split(' ', 1)[1])
+
+    def stop(self, timeout: float = 10.0) -> None:
+        """Close stdin, then SIGTERM, then SIGKILL; record the lifetime CPU seconds."""
+        try:
+            self.proc.stdin.close()
+        except OSError:
+            pass
+        deadline = time.monotonic() + timeout
+        signals = [(timeout / 2, self.proc.terminate), (timeout, self.proc.kill)]
+        while self.proc.returncode is None:
+            try:
+                pid, status, usage = os.wait4(self.proc.pid, os.WNOHANG)
+            except ChildProcessError:  # reaped elsewhere
+                self.proc.returncode = self.proc.poll()
+                break
+            if pid:
+                self.proc.returncode = os.waitstatus_to_exitcode(status)
+                self.cpu_lifetime_s = usage.ru_utime + usage.ru_stime
+                break
+            elapsed = timeout - (deadline - time.monotonic())
+            while signals and elapsed >= signals[0][0]:
+                signals.pop(0)[1]()
+            if time.monotonic() > deadline + 5:
+                break
+            time.sleep(0.05)
+
+
+# --- a run ----------------------------------------------------------------------------------------
+
+class LoadRun:
+    """One server process and its network, shared by the phases of one load point."""
+
+    def __init__(self, spec: LoadSpec, progress: Progress = print) -> None:
+        """Start the server (guarded), in its own namespace when bytes are counted on the wire."""
+        from cft_action import guard
+        self.spec = spec
+        self.progress = progress
+        self.action = f'/cft_load_{os.urandom(4).hex()}'
+        self.depth = queue_depth(spec)
+        self.topology: Optional[_netns.Topology] = None
+        self.network_note = ''
+        reason = _netns.unavailable_reason() if spec.network in ('auto', 'netns') else \
+            'network counting not requested'
+        if reason is not None and spec.network == 'netns':
+            raise RuntimeError(f'network namespaces are not available: {reason}')
+        self.env = dict(os.environ)
+        self.env['ROS_DOMAIN_ID'] = os.environ.get('CFT_LOAD_DOMAIN_ID') or \
+            str(random.randint(1, 101))
+        self.env.pop('CFT_ACTION_FEEDBACK_FILTER', None)  # each phase sets its own mode
+        if reason is None:
+            _netns.remove_stale()
+            self.topology = _netns.Topology()
+            self.env.update(_netns.ENVIRONMENT)
+            self.bytes_method = 'netns'
+            self.network_note = ('bytes: rx_bytes of each client\'s own veth interface (network '
+                                 'namespace per client, FASTDDS_BUILTIN_TRANSPORTS=UDPv4)')
+        else:
+            self.env['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+            self.bytes_method = 'estimated'
+            self.network_note = (f'bytes ESTIMATED as feedback messages taken x serialized size '
+                                 f'({feedback_size(spec.pad)} B), no headers, status or discovery: '
+                                 f'no network namespaces ({reason})')
+        argv = [sys.executable, '-u', str(HERE / '_server.py'), self.action,
+                str(1.0 / spec.rate_hz), str(spec.pad), str(self.depth)]
+        if self.topology:
+            argv = self.topology.command(self.topology.server, argv)
+        self.server = Process(argv, guard.environment(self.env), 'server')
+        try:
+            self.server.expect('READY', 60)
+        except Exception:
+            self.close()
+            raise
+
+    def server_stats(self) -> dict[str, Any]:
+        """The server's counters."""
+        return self.server.request_json('stats', 'STATS')
+
+    def close(self) -> None:
+        """Stop the server and delete the namespaces."""
+        self.server.stop()
+        if self.topology:
+            self.topology.close()
+
+    # --- one phase ----------------------------------------------------------------------------
+
+    def window_started(self, clients: list['Process'], server_stats: dict[str, Any]) -> None:
+        """Hook: the clients are ready and ``go`` comes next. For subclasses that observe."""
+
+    def window_ended(self, clients: list['Process']) -> dict[str, Any]:
+        """Hook: the measured window is over; return entries to add to the phase's figures."""
+        return {}
+
+    def _start_clients(self, config: str) -> list[Process]:
+        spec = self.spec
+        clients = []
+        for i in range(spec.clients):
+            argv = [sys.executable, '-u', str(HERE / '_client.py'), self.action, config,
+                    str(spec.goals), str(spec.order), str(self.depth)]
+            if self.topology:
+                argv = self.topology.command(self.topology.add_client(), argv)
+            clients.append(Process(argv, self.env, f'{config} client {i}'))
+        return clients
+
+    def _network(self, clients: list[Process]) -> list[Optional[dict[str, int]]]:
+        if not self.topology:
+            return [None] * len(clients)
+        return [_netns.interface_counters(c.pid) for c in clients]
+
+    def _wait_for_goals(self, before: dict[str, Any]) -> dict[str, Any]:
+        """Wait until the server accepted and finished every goal of the phase."""
+        spec = self.spec
+        expected = spec.total_goals * spec.order
+        timeout = spec.goals_timeout or 120 + 30 * spec.order / spec.rate_hz
+        deadline = time.monotonic() + timeout
+        shown = 0.0
+        while True:
+            stats = self.server_stats()
+            published = stats['published'] - before['published']
+            accepted = stats['accepted'] - before['accepted']
+            if accepted >= spec.total_goals and stats['active'] == 0:
+                return stats
+            if time.monotonic() > deadline:
+                raise RuntimeError(f'goals did not finish within {timeout:.0f} s: '
+                                   f'{accepted}/{spec.total_goals} accepted, '
+                                   f'{published}/{expected} feedback published')
+            if time.monotonic() - shown >= 2:
+                shown = time.monotonic()
+                self.progress(f'    server: {accepted}/{spec.total_goals} goals accepted, '
+                              f'{published}/{expected} feedback published')
+            time.sleep(0.25)
+
+    def _wait_for_quiet(self, clients: list[Process], since: float) -> None:
+        """Wait until the clients' counters stop moving, at least SETTLE_S after ``since``."""
+        deadline = time.monotonic() + self.spec.drain_timeout
+        last: Optional[list[dict[str, Any]]] = None
+        stable_since = time.monotonic()
+        shown = time.monotonic()
+        while True:
+            now = [c.request_json('progress', 'PROGRESS') for c in clients]
+            t = time.monotonic()
+            if now != last:
+                last, stable_since = now, t
+            if t - stable_since >= 1.5 and t - since >= SETTLE_S:
+                return
+            if t > deadline:
+                self.progress(f'    drain timeout after {self.spec.drain_timeout:.0f} s; '
+                              'accounting what arrived')
+                return
+            if t - shown >= 3:
+                shown = t
+                taken = sum(p['own'] + p['foreign'] for p in now)
+                self.progress(f'    clients still taking feedback: {taken} taken so far')
+            time.sleep(0.5)
+
+    def run_phase(self, config: str) -> dict[str, Any]:
+        """Run one configuration under this load; return its raw figures and summary."""
+        spec = self.spec
+        self.progress(f'[{CONFIG_LABELS[config]}] starting {spec.clients} client processes')
+        started = time.monotonic()
+        clients = self._start_clients(config)
+        try:
+            for client in clients:
+                client.expect('READY', 120 + 2 * spec.clients)
+            ready_s = time.monotonic() - started
+            self.progress(f'[{CONFIG_LABELS[config]}] {spec.clients} clients matched in '
+                          f'{ready_s:.1f} s; sending {spec.goals} goals each, {spec.order} '
+                          f'feedback per goal at {spec.rate_hz:g} Hz')
+            before = self.server_stats()
+            self.window_started(clients, before)
+            net_before = self._network(clients)
+            go = time.monotonic()
+            for client in clients:
+                client.send('go')
+            self._wait_for_goals(before)
+            goals_s = time.monotonic() - go
+            self.progress(f'[{CONFIG_LABELS[config]}] goals finished in {goals_s:.1f} s; '
+                          'waiting for the clients to take the rest')
+            self._wait_for_quiet(clients, time.monotonic())
+            window_s = time.monotonic() - go
+            net_after = self._network(clients)
+            extra = self.window_ended(clients)
+            after = self.server_stats()
+            reports = [c.request_json('report', 'RESULT') for c in clients]
+        finally:
+            for client in clients:
+                client.stop()
+            if self.topology:
+                # The namespaces of this phase's clients go with them; new ones come next phase.
+                self.topology.close_clients()
+        if self.server.proc.poll() is not None:
+            raise RuntimeError(f'the server died: {self.server.stderr[-20:]}')
+        for report, client, b, a in zip(reports, clients, net_before, net_after):
+            report['cpu_lifetime_s'] = client.cpu_lifetime_s
+            if b is not None and a is not None:
+                report.update({k: a[k] - b[k] for k in a})
+        phase = {
+            'config': config,
+            'published': after['published'] - before['published'],
+            'accepted': after['accepted'] - before['accepted'],
+            'server_cpu_s': after['cpu_s'] - before['cpu_s'],
+            'late_ticks': after['late_ticks'] - before['late_ticks'],
+            'intervals': after['intervals'] - before['intervals'],
+            'interval_s': after['interval_s'] - before['interval_s'],
+            'guard': after.get('guard', ''),
+            'ready_s': ready_s, 'goals_s': goals_s, 'window_s': window_s,
+            'clients': reports,
+            **extra,
+        }
+        phase['summary'] = summarize(phase, spec, self.bytes_method)
+        time.sleep(1.0)  # let discovery retire this phase's readers before the next one matches
+        return phase
+
+
+# --- accounting -----------------------------------------------------------------------------------
+
+def percentile(values: Sequence[float], q: float) -> Optional[float]:
+    """The ``q``-quantile (0..1) of ``values`` by nearest rank, or None when empty."""
+    if not values:
+        return None
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, max(0, round(q * len(ordered)) - 1))]
+
+
+def summarize(phase: dict[str, Any], spec: LoadSpec, bytes_method: str) -> dict[str, Any]:
+    """Per-client means and totals of one phase; moves the latency samples into percentiles."""
+    clients = phase['clients']
+    size = feedback_size(spec.pad)
+    latencies = [v for c in clients for v in c.pop('latency_us')]
+    for c in clients:
+        c['est_bytes'] = (c['own'] + c['foreign']) * size
+    byte_key = 'rx_bytes' if bytes_method == 'netns' else 'est_bytes'
+    mean = statistics.fmean
+    own_mean = mean(c['own'] for c in clients)
+    bytes_per_client = [c[byte_key] for c in clients]
+    updates = sum(c['updates'] for c in clients)
+    return {
+        'own_per_client': own_mean,
+        'foreign_per_client': mean(c['foreign'] for c in clients),
+        'expected_own_per_client': spec.goals * spec.order,
+        'all_feedback': phase['published'],
+        'callbacks_per_client': mean(c['callbacks'] for c in clients),
+        'misrouted': sum(c['misrouted'] for c in clients),
+        'bytes_method': bytes_method,
+        'bytes_per_client': mean(bytes_per_client),
+        'bytes_per_client_min': min(bytes_per_client),
+        'bytes_per_client_max': max(bytes_per_client),
+        'own_feedback_bytes_per_client': own_mean * size,
+        'feedback_message_bytes': size,
+        'client_cpu_s': sum(c['cpu_s'] for c in clients),
+        'client_cpu_s_per_client': mean(c['cpu_s'] for c in clients),
+        'server_cpu_s': phase['server_cpu_s'],
+        'updates': updates,
+        'updates_per_goal': updates / spec.total_goals,
+        'recreations': sum(c.get('recreations', 0) for c in clients),
+        'filters_disabled': sum(1 for c in clients
+                                if phase['config'] == 'upstream' and not c['active']),
+        # Feedback per second per goal, first to last: below rate_hz when the server could not
+        # keep the rate (late_ticks counts that).
+        'achieved_rate_hz': (phase['intervals'] / phase['interval_s']
+                             if phase['interval_s'] else None),
+        'late_ticks': phase['late_ticks'],
+        'latency_samples': len(latencies),
+        'latency_p50_ms': _ms(percentile(latencies, 0.50)),
+        'latency_p90_ms': _ms(percentile(latencies, 0.90)),
+        'latency_p99_ms': _ms(percentile(latencies, 0.99)),
+        'latency_max_ms': _ms(max(latencies) if latencies else None),
+    }
+
+
+def _ms(us: Optional[float]) -> Optional[float]:
+    return None if us is None else us / 1000.0
+
+
+def add_ratios(phases: list[dict[str, Any]]) -> None:
+    """Add ``ratio_to_plain`` to every summary, when a plain rclpy phase is among ``phases``."""
+    plain = next((p['summary'] for p in phases if p['config'] == 'rclpy'), None)
+    if plain is None:
+        return
+    keys = {'foreign': 'foreign_per_client', 'bytes': 'bytes_per_client',
+            'cpu': 'client_cpu_s', 'p50': 'latency_p50_ms', 'p99': 'latency_p99_ms'}
+    for phase in phases:
+        s = phase['summary']
+        s['ratio_to_plain'] = {name: (s[k] / plain[k] if s[k] is not None and plain[k] else None)
+                               for name, k in keys.items()}
+        s['bytes_to_own_feedback'] = (s['bytes_per_client'] / s['own_feedback_bytes_per_client']
+                                      if s['own_feedback_bytes_per_client'] else None)
+
+
+def run_load(spec: LoadSpec, configs: Sequence[str], progress: Progress = print,
+             run_class: type['LoadRun'] = LoadRun) -> dict[str, Any]:
+    """Run ``configs`` one after another under the load ``spec`` against one server."""
+    run = run_class(spec, progress)
+    try:
+        progress(f'server ready ({run.network_note})')
+        phases = [run.run_phase(config) for config in configs]
+    finally:
+        run.close()
+    add_ratios(phases)
+    return {'spec': dataclasses.asdict(spec), 'queue_depth': run.depth,
+            'bytes_method': run.bytes_method, 'network_note': run.network_note,
+            'domain_id': run.env['ROS_DOMAIN_ID'], 'phases': phases}
+
+
+def environment_facts() -> dict[str, Any]:
+    """Machine and versions, for a result file."""
+    from importlib import metadata
+    versions = {}
+    for dist in ('ros-jazzy-rclpy', 'rclpy', 'ros-rcl', 'ros-rcl-action', 'ros-rmw-fastrtps-cpp',
+                 'ros-fastrtps', 'cft-action', 'matplotlib'):
+        try:
+            versions[dist] = metadata.version(dist)
+        except metadata.PackageNotFoundError:
+            versions[dist] = None
+    cpu = ''
+    try:
+        with open('/proc/cpuinfo') as info:
+            cpu = next((line.split(':', 1)[1].strip() for line in info
+                        if line.startswith('model name')), '')
+    except OSError:
+        pass
+    return {'host': platform.node(), 'platform': platform.platform(),
+            'python': platform.python_version(), 'cpus': os.cpu_count(), 'cpu_model': cpu,
+            'load_average_at_start': os.getloadavg(), 'versions': versions,
+            'rmw': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp (default)')}
+
+
+# --- presentation ---------------------------------------------------------------------------------
+
+def _fmt(value: Optional[float], spec: str = '.0f') -> str:
+    return '-' if value is None else format(value, spec)
+
+
+def format_table(result: dict[str, Any]) -> str:
+    """The per-configuration table: absolute figures, then ratios to plain rclpy."""
+    spec = result['spec']
+    rows = [('configuration', 'own/cl', 'foreign/cl', 'kB rx/cl', 'rx/own', 'CPU s',
+             'updates', 'upd/goal', 'p50 ms', 'p99 ms', 'rate Hz')]
+    for phase in result['phases']:
+        s = phase['summary']
+        rows.append((CONFIG_LABELS[phase['config']], _fmt(s['own_per_client']),
+                     _fmt(s['foreign_per_client']), _fmt(s['bytes_per_client'] / 1000, '.1f'),
+                     _fmt(s.get('bytes_to_own_feedback'), '.2f'), _fmt(s['client_cpu_s'], '.2f'),
+                     str(s['updates']), _fmt(s['updates_per_goal'], '.2f'),
+                     _fmt(s['latency_p50_ms'], '.2f'), _fmt(s['latency_p99_ms'], '.2f'),
+                     _fmt(s['achieved_rate_hz'], '.0f')))
+    ratio_rows = [('ratio to plain', 'foreign', 'bytes', 'CPU', 'p50', 'p99')]
+    for phase in result['phases']:
+        r = phase['summary'].get('ratio_to_plain')
+        if r:
+            ratio_rows.append((CONFIG_LABELS[phase['config']], *(
+                _fmt(r[k], '.3f') for k in ('foreign', 'bytes', 'cpu', 'p50', 'p99'))))
+    first = result['phases'][0]['summary']
+    header = (f"N = {spec['clients']} clients x M = {spec['goals']} goals, {spec['order']} "
+              f"feedback per goal at {spec['rate_hz']:g} Hz, {first['feedback_message_bytes']} B "
+              f"per feedback message; all feedback per phase: {first['all_feedback']}; "
+              f"own feedback expected per client: {first['expected_own_per_client']}")
+    notes = [f"note: {result['network_note']}",
+             'note: CPU s = user + system seconds of all client processes, from go to the end of '
+             'the phase; latency from the server\'s publish to the user callback; rate Hz = '
+             'feedback per second per goal that the server achieved']
+    return '\n'.join([header, _grid(rows), '', _grid(ratio_rows), *notes])
+
+
+def _grid(rows: list[tuple[str, ...]]) -> str:
+    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
+    lines = []
+    for n, row in enumerate(rows):
+        lines.append('  '.join(cell.ljust(w) if i == 0 else cell.rjust(w)
+                               for i, (cell, w) in enumerate(zip(row, widths))))
+        if n == 0:
+            lines.append('  '.join('-' * w for w in widths))
+    return '\n'.join(lines)

@@ -1,0 +1,119 @@
+"""Plots of load results, with matplotlib's file-only Agg backend (no display needed)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+from demos._harness import CONFIG_LABELS
+
+#: One colour per configuration, the same in every plot.
+COLOURS = {'rclpy': '#7f7f7f', 'client': '#1f77b4', 'goals': '#2ca02c', 'upstream': '#d62728'}
+
+
+def pyplot() -> Any:
+    """matplotlib.pyplot on the Agg backend."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+    return plt
+
+
+def demo_figure(result: dict[str, Any], path: Path) -> Path:
+    """Write the one-load-point comparison of the demo to ``path`` (PNG); return the path."""
+    plt = pyplot()
+    phases = result['phases']
+    spec = result['spec']
+    labels = [CONFIG_LABELS[p['config']].replace(' ', '\n', 1) for p in phases]
+    colours = [COLOURS[p['config']] for p in phases]
+    s = [p['summary'] for p in phases]
+    x = range(len(phases))
+    fig, axes = plt.subplots(2, 3, figsize=(14, 8.2))
+
+    ax = axes[0][0]
+    own = [v['own_per_client'] for v in s]
+    foreign = [v['foreign_per_client'] for v in s]
+    ax.bar(x, own, color=colours, label='own')
+    ax.bar(x, foreign, bottom=own, color=colours, alpha=0.35, hatch='//', label='foreign')
+    ax.set_title('feedback messages taken per client\n(solid: own, hatched: foreign)')
+    _annotate(ax, x, [o + f for o, f in zip(own, foreign)],
+              [f'{f:.0f} foreign' for f in foreign])
+
+    ax = axes[0][1]
+    kb = [v['bytes_per_client'] / 1000 for v in s]
+    ax.bar(x, kb, color=colours)
+    ax.set_yscale('log')
+    ax.axhline(s[0]['own_feedback_bytes_per_client'] / 1000, color='k', ls='--', lw=1,
+               label='own feedback payload (the floor)')
+    ax.legend(loc='upper right', fontsize=8)
+    method = 'rx_bytes per client interface' if result['bytes_method'] == 'netns' \
+        else 'ESTIMATED: messages x size'
+    ax.set_title(f'kB received per client, log\n({method})')
+    _annotate(ax, x, kb, [f'{v:.0f}' for v in kb])
+
+    ax = axes[0][2]
+    cpu = [v['client_cpu_s'] for v in s]
+    ax.bar(x, cpu, color=colours)
+    ax.set_title('client CPU seconds (user + system,\nall client processes)')
+    _annotate(ax, x, cpu, [f'{v:.1f}' for v in cpu])
+
+    ax = axes[1][0]
+    width = 0.38
+    p50 = [v['latency_p50_ms'] or 0 for v in s]
+    p99 = [v['latency_p99_ms'] or 0 for v in s]
+    ax.bar([i - width / 2 for i in x], p50, width, color=colours, label='p50')
+    ax.bar([i + width / 2 for i in x], p99, width, color=colours, alpha=0.45, label='p99')
+    ax.set_yscale('log')
+    ax.set_title('feedback latency, publish to callback (ms, log)\n(left: p50, right: p99)')
+    for i, (a, b) in enumerate(zip(p50, p99)):
+        ax.text(i - width / 2, a, _short(a), ha='center', va='bottom', fontsize=8)
+        ax.text(i + width / 2, b, _short(b), ha='center', va='bottom', fontsize=8)
+    ax.margins(y=0.15)
+
+    ax = axes[1][1]
+    per_goal = [v['updates_per_goal'] for v in s]
+    ax.bar(x, per_goal, color=colours)
+    ax.set_title('filter updates per goal\n(each one an event at the server\'s writer)')
+    _annotate(ax, x, per_goal, [f'{v:.2f}' for v in per_goal])
+
+    ax = axes[1][2]
+    ratios = [p['summary'].get('ratio_to_plain') or {} for p in phases]
+    keys = ('foreign', 'bytes', 'cpu', 'p99')
+    width = 0.8 / max(1, len(phases))
+    for j, (phase, r) in enumerate(zip(phases, ratios)):
+        positions = [k + (j - (len(phases) - 1) / 2) * width for k in range(len(keys))]
+        values = [r.get(k) or 0 for k in keys]
+        ax.bar(positions, values, width, color=COLOURS[phase['config']],
+               label=CONFIG_LABELS[phase['config']])
+        if phase['config'] != 'rclpy':
+            for position, value in zip(positions, values):
+                ax.text(position, value, f'{value:.2f}', ha='center', va='bottom', fontsize=7,
+                        rotation=90)
+    ax.set_xticks(range(len(keys)), ['foreign msgs', 'bytes', 'client CPU', 'p99 latency'])
+    ax.set_ylim(0, 1.25)
+    ax.axhline(1.0, color='k', lw=0.8)
+    ax.set_title('ratio to plain rclpy (lower is better)')
+    ax.legend(fontsize=8, loc='upper right')
+
+    for ax in list(axes.flat)[:5]:  # the sixth has its own ticks
+        ax.set_xticks(list(x), labels, fontsize=9)
+    first = s[0]
+    fig.suptitle(f"{spec['clients']} client processes x {spec['goals']} goals, "
+                 f"{spec['order']} feedback messages per goal at {spec['rate_hz']:g} Hz "
+                 f"({first['feedback_message_bytes']} B each), one guarded server; "
+                 f"all feedback per configuration: {first['all_feedback']}", fontsize=11)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    return path
+
+
+def _short(value: float) -> str:
+    return f'{value:.0f}' if value >= 100 else f'{value:.3g}'
+
+
+def _annotate(ax: Any, x: Any, heights: list[float], texts: list[str]) -> None:
+    for i, (h, t) in enumerate(zip(heights, texts)):
+        ax.text(i, h, t, ha='center', va='bottom', fontsize=8)
+    ax.margins(y=0.15)

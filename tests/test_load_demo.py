@@ -1,0 +1,76 @@
+"""The load demo's accounting: own and foreign feedback add up to what the server published.
+
+A small load (N = 3 client processes, 2 goals each) against the demo's own server, through the
+same harness as ``make demo`` and ``make bench``. Bytes are taken from message counts here (no
+network namespaces): this test checks behaviour and bookkeeping; the figures come from the demo and
+the benchmark.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from demos import _harness
+
+CLIENTS, GOALS, ORDER = 3, 2, 20
+
+
+@pytest.fixture(scope='module')
+def result():
+    """One run, plain rclpy then cft client mode; shared by the tests of this module."""
+    spec = _harness.LoadSpec(clients=CLIENTS, goals=GOALS, order=ORDER, network='count',
+                             drain_timeout=20)
+    return _harness.run_load(spec, ['rclpy', 'client'], progress=lambda line: None)
+
+
+def phase(result, config):
+    return next(p for p in result['phases'] if p['config'] == config)
+
+
+def test_the_server_published_every_goals_feedback(result):
+    for p in result['phases']:
+        assert p['accepted'] == CLIENTS * GOALS
+        assert p['published'] == CLIENTS * GOALS * ORDER
+        assert p['guard'].startswith('active'), p['guard']
+
+
+def test_plain_clients_take_all_feedback_own_and_foreign(result):
+    p = phase(result, 'rclpy')
+    for client in p['clients']:
+        assert client['own'] + client['foreign'] == p['published'], client
+        assert client['own'] == GOALS * ORDER
+        assert client['callbacks'] == client['own']
+        assert client['misrouted'] == 0
+        assert client['updates'] == 0
+    summary = p['summary']
+    assert summary['foreign_per_client'] == p['published'] * (CLIENTS - 1) / CLIENTS
+    assert summary['latency_samples'] == CLIENTS * GOALS * ORDER
+
+
+def test_client_mode_takes_only_its_own_feedback(result):
+    p = phase(result, 'client')
+    for client in p['clients']:
+        assert client['active'], client['reason']
+        assert client['foreign'] == 0, client
+        assert client['own'] == GOALS * ORDER
+        assert client['callbacks'] == client['own']
+        assert client['misrouted'] == 0
+        # The library's own counters agree with the harness's.
+        assert client['lib_taken'] == client['own']
+        assert client['lib_dropped'] == 0
+        assert client['updates'] == 0
+    summary = p['summary']
+    assert summary['foreign_per_client'] == 0
+    assert summary['ratio_to_plain']['foreign'] == 0
+
+
+def test_estimated_bytes_follow_the_counts(result):
+    size = _harness.feedback_size(0)
+    assert result['bytes_method'] == 'estimated'
+    for p in result['phases']:
+        for client in p['clients']:
+            assert client['est_bytes'] == (client['own'] + client['foreign']) * size
+    plain, filtered = phase(result, 'rclpy')['summary'], phase(result, 'client')['summary']
+    assert filtered['ratio_to_plain']['bytes'] == pytest.approx(1 / CLIENTS)
+    assert filtered['bytes_to_own_feedback'] == pytest.approx(1.0)
+    assert plain['bytes_to_own_feedback'] == pytest.approx(CLIENTS)
