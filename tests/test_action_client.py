@@ -118,7 +118,21 @@ def test_many_concurrent_goals_keep_the_filter_active(ros, mode, goals):
 def make_client(ros, action, **kwargs):
     client = ActionClient(ros.node, Fibonacci, action, **kwargs)
     assert client.wait_for_server(timeout_sec=20)
+    assert round_trip(ros, client), 'the server never answered a goal'
     return client
+
+
+def round_trip(ros, client, tries=10):
+    """Complete one order-0 goal (no feedback), resending while the service endpoints match.
+
+    wait_for_server sees the server in the graph; a goal response written before the server's
+    response writer matched this client's reader is lost for good (volatile), as with rclpy.
+    """
+    for _ in range(tries):
+        future = client.send_goal_async(Fibonacci.Goal(order=0))
+        if ros.spin_until(future.done, 2):
+            return future.result().accepted
+    return False
 
 
 def send(ros, client, order, **kwargs):
