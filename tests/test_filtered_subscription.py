@@ -11,6 +11,7 @@ from std_msgs.msg import Float64, Int32, String
 
 from cft_action import (ContentFilterError, create_filtered_subscription, get_content_filter,
                         is_content_filter_supported, is_filtered, set_content_filter)
+from tests.helpers._polling import wait_until
 from tests.support import ChildProcess, RosSession, unique_name
 
 QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -149,7 +150,7 @@ def test_filter_changed_while_executor_spins():
             ros.node, Int32, f'{prefix}/ints', on_message, QOS, 'data < %0', [5])
         assert child.request('wait ints 1', 'MATCHED') == 'MATCHED'
         child.request(f'burst {BURST}', 'SENT')
-        assert wait_for(lambda: len(received) >= 5, 15)
+        assert wait_until(lambda: len(received) >= 5, 15)
         time.sleep(0.5)
         with lock:
             assert received == [0, 1, 2, 3, 4]
@@ -159,7 +160,7 @@ def test_filter_changed_while_executor_spins():
         set_content_filter(subscription, 'data >= %0', [BURST - 3])
         time.sleep(1.0)  # the change reaches the writer by discovery
         child.request(f'burst {BURST}', 'SENT')
-        assert wait_for(lambda: len(received) >= 3, 15)
+        assert wait_until(lambda: len(received) >= 3, 15)
         time.sleep(0.5)
         with lock:
             assert received == [BURST - 3, BURST - 2, BURST - 1]
@@ -170,15 +171,6 @@ def test_filter_changed_while_executor_spins():
         child.stop()
         ros.close()
         spinner.join(timeout=5)
-
-
-def wait_for(predicate, timeout):
-    deadline = time.monotonic() + timeout
-    while not predicate():
-        if time.monotonic() > deadline:
-            return False
-        time.sleep(0.02)
-    return True
 
 
 def test_writer_filtered_samples_are_counted_as_lost(ros, capfd):
