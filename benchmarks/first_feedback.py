@@ -38,6 +38,7 @@ from test_msgs.action import Fibonacci  # noqa: E402
 
 from cft_action import guard  # noqa: E402
 from demos import _client, _harness  # noqa: E402
+from demos._proc import Proc  # noqa: E402
 
 CONFIGS = ('client', 'goals', 'upstream', 'rclpy')
 QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
@@ -101,9 +102,8 @@ def main() -> None:
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     rclpy.init()
     action = f'/first_feedback_{random.randrange(1 << 32):08x}'
-    server = _harness.Process(
-        [sys.executable, '-u', str(REPO / 'demos' / '_server.py'), action, str(args.period), '0',
-         '1000'], guard.environment(), 'server')
+    server = Proc('server', [sys.executable, '-u', str(REPO / 'demos' / '_server.py'), action,
+                             str(args.period), '--depth', '1000'], guard.environment())
     rows = []
     try:
         server.expect('READY', 30)

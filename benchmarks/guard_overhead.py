@@ -44,7 +44,8 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from benchmarks.hazard import Proc, machine_line, plain_env, server_env  # noqa: E402
+from benchmarks.hazard import machine_line, plain_env, server_env  # noqa: E402
+from demos._proc import Proc  # noqa: E402
 
 THIS = Path(__file__).resolve()
 PYTHON = sys.executable

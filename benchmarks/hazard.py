@@ -14,9 +14,10 @@ reproduces them, cell by cell, with and without the guard (:mod:`cft_action.guar
 - ``exit``: a process creates ``--k`` filtered clients, then exits normally; up to ``--exits``
   processes, one after the other.
 
-The server publishes feedback every PERIOD s (``--periods``, default 0.0005 0.01 0.1) from a ticker
-thread to one goal that an ordinary, unfiltered client keeps running; the feedback carries
-``small`` (one int32) or ``10k`` (2500 int32, 10,000 bytes) payload (``--payloads``). Each cell runs
+The server (``demos/_server.py``, rclpy's default queues) publishes feedback every PERIOD s
+(``--periods``, default 0.0005 0.01 0.1) from a ticker thread to one goal that an ordinary,
+unfiltered client keeps running; the feedback ``sequence`` is ``small`` (the server's 3-int32
+header, 12 bytes) or ``10k`` (2500 int32, 10,000 bytes) (``--payloads``). Each cell runs
 to the first server crash or to its bound of events, with the guard ``on`` and ``off``
 (``--guard``). A crashed server's core (``ulimit -c unlimited`` in the server, cwd a fresh
 directory) is read with gdb for the crashing thread's backtrace; without gdb or a core, the exit
@@ -43,7 +44,6 @@ import os
 import platform
 import random
 import re
-import resource
 import shutil
 import signal
 import subprocess
@@ -59,11 +59,16 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
+from demos._proc import Proc  # noqa: E402
+from demos._server import HEADER  # noqa: E402
+
 THIS = Path(__file__).resolve()
 PYTHON = sys.executable
+SERVER = ROOT / 'demos' / '_server.py'
 
 EVENTS = ('update', 'destroy', 'create', 'exit')
-PAYLOADS = {'small': 0, '10k': 2499}  # int32 elements after the counter: 1 or 2500 in all
+# int32 elements after the server's 3-element header (index, publish time): 3 or 2500 in all
+PAYLOADS = {'small': 0, '10k': 2500 - HEADER}
 # Two expressions that match no goal; the update role alternates them.
 NEVER = ('goal_id.uuid[0] = 0 AND goal_id.uuid[0] = 1',
          'goal_id.uuid[0] = 0 AND goal_id.uuid[0] = 2')
@@ -87,158 +92,6 @@ def _alive(pid: int) -> bool:
     except (OSError, IndexError):
         return False
     return state not in ('Z', 'X')
-
-
-def _qos_kwargs(depth: int, side: str) -> dict[str, Any]:
-    """Keep-last ``depth``, reliable, for every queue of an action server or client; {} for 0."""
-    if depth <= 0:
-        return {}
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
-    profile = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
-    names = ['goal_service_qos_profile', 'result_service_qos_profile',
-             'cancel_service_qos_profile', f'feedback_{side}_qos_profile']
-    return {name: profile for name in names}
-
-
-def guard_report() -> dict[str, Any]:
-    import cft_action.guard as guard
-    return {'active': guard.is_active(), 'status': guard.status(), 'calls': guard.call_counts()}
-
-
-class TickingServer:
-    """A Fibonacci action server whose ticker thread publishes feedback for every running goal.
-
-    Goal ``order`` is the number of feedback messages (``FOREVER`` runs until canceled); each
-    feedback ``sequence`` is ``[k] + [0] * pad``. A negative order is rejected; cancels are
-    accepted. The result's ``sequence`` is ``[feedback messages published for this goal]``, so a
-    client can count what it lost.
-    """
-
-    def __init__(self, node: Any, executor: Any, action: str, period: float, pad: int,
-                 depth: int) -> None:
-        import array
-
-        from rclpy.action import ActionServer, CancelResponse, GoalResponse
-        from rclpy.callback_groups import ReentrantCallbackGroup
-        from test_msgs.action import Fibonacci
-        self._Fibonacci = Fibonacci
-        self._reject = GoalResponse.REJECT
-        self._accept = GoalResponse.ACCEPT
-        self.executor = executor
-        self.period = period
-        self.template = array.array('i', [0] * (1 + pad))
-        self.lock = threading.Lock()
-        self.active: dict[int, list[Any]] = {}  # id(handle) -> [handle, next k, order, done]
-        self.published = 0
-        self.accepted = 0
-        self.late_ticks = 0
-        self.running = True
-        self.server = ActionServer(
-            node, Fibonacci, action, execute_callback=self.execute,
-            goal_callback=lambda request: self._reject if request.order < 0 else self._accept,
-            cancel_callback=lambda _: CancelResponse.ACCEPT,
-            callback_group=ReentrantCallbackGroup(), **_qos_kwargs(depth, 'pub'))
-        self.ticker = threading.Thread(target=self.tick, daemon=True)
-        self.ticker.start()
-
-    def publish(self, goal_handle: Any, k: int) -> None:
-        import array
-        sequence = array.array('i', self.template)
-        sequence[0] = k
-        goal_handle.publish_feedback(self._Fibonacci.Feedback(sequence=sequence))
-        with self.lock:
-            self.published += 1
-
-    async def execute(self, goal_handle: Any) -> Any:
-        from rclpy.task import Future
-        order = goal_handle.request.order
-        if order > 0:
-            self.publish(goal_handle, 0)
-        done = Future()
-        entry = [goal_handle, 1 if order > 0 else 0, order, done]
-        with self.lock:
-            self.accepted += 1
-            self.active[id(goal_handle)] = entry
-        outcome = await done
-        if outcome == 'canceled':
-            goal_handle.canceled()
-        else:
-            goal_handle.succeed()
-        return self._Fibonacci.Result(sequence=[entry[1]])
-
-    def tick(self) -> None:
-        due = time.monotonic()
-        while self.running:
-            due += self.period
-            delay = due - time.monotonic()
-            if delay > 0:
-                time.sleep(delay)
-            elif delay < -self.period:
-                self.late_ticks += 1  # behind by more than a period: restart the schedule
-                due = time.monotonic()
-            with self.lock:
-                goals = list(self.active.items())
-            finished = []
-            for key, entry in goals:
-                goal_handle, k, order, done = entry
-                if goal_handle.is_cancel_requested:
-                    finished.append((key, done, 'canceled'))
-                elif k >= order:
-                    finished.append((key, done, 'succeeded'))
-                else:
-                    self.publish(goal_handle, k)
-                    entry[1] = k + 1
-            with self.lock:
-                for key, _, _ in finished:
-                    del self.active[key]
-            for _, done, outcome in finished:
-                done.set_result(outcome)
-            if finished:
-                self.executor.wake()
-
-    def stats(self) -> dict[str, Any]:
-        usage = resource.getrusage(resource.RUSAGE_SELF)
-        with self.lock:
-            return {'t': time.monotonic(), 'published': self.published,
-                    'accepted': self.accepted, 'active': len(self.active),
-                    'late_ticks': self.late_ticks, 'cpu_s': usage.ru_utime + usage.ru_stime,
-                    'guard_calls': guard_report()['calls']}
-
-
-def role_server(action: str, period: float, pad: int, depth: int) -> int:
-    """The action server. Prints STATUS, READY, then STATS every 2 s; ends when stdin closes."""
-    from rclpy.executors import SingleThreadedExecutor
-    from rclpy.node import Node
-    node = Node('hazard_server')
-    executor = SingleThreadedExecutor()
-    executor.add_node(node)
-    server = TickingServer(node, executor, action, period, pad, depth)
-    report = guard_report()
-    say('STATUS', report['active'], report['status'])
-    spinner = threading.Thread(target=executor.spin, daemon=True)
-    spinner.start()
-    stop = threading.Event()
-
-    def stats_loop() -> None:
-        while not stop.wait(2.0):
-            say('STATS', json.dumps(server.stats()))
-
-    say('STATS', json.dumps(server.stats()))
-    threading.Thread(target=stats_loop, daemon=True).start()
-    say('READY')
-    for line in sys.stdin:  # end of input ends the server
-        if line.strip() == 'stats':
-            say('STATS', json.dumps(server.stats()))
-    # Stop every thread that calls into rclpy, then leave without interpreter finalization: a
-    # daemon thread that re-enters Python during finalization is ended by pthread_exit, whose
-    # unwinding through rclpy's C++ frames calls std::terminate (SIGABRT), which is not the hazard.
-    stop.set()
-    server.running = False
-    server.ticker.join(2.0)
-    executor.shutdown(timeout_sec=2)
-    spinner.join(2.0)
-    sys.stdout.flush()
-    os._exit(0)
 
 
 def role_goal(action: str) -> int:
@@ -372,8 +225,6 @@ def run_role(argv: list[str]) -> int:
     role, args = argv[0], argv[1:]
     rclpy.init()
     try:
-        if role == 'server':
-            return role_server(args[0], float(args[1]), int(args[2]), int(args[3]))
         if role == 'goal':
             return role_goal(args[0])
         if role == 'update':
@@ -396,97 +247,14 @@ def run_role(argv: list[str]) -> int:
 # The harness
 # ==================================================================================================
 
-class Proc:
-    """A child process whose merged stdout/stderr is read line by line by a thread."""
+def server_command(action: str, period: float, pad: int, depth: Optional[int] = None) -> list[str]:
+    """The action server (``demos/_server.py``) with counters every 2 s, for a crash watcher.
 
-    def __init__(self, name: str, args: list[str], env: dict[str, str],
-                 cwd: Optional[str] = None, core: bool = False) -> None:
-        self.name = name
-        self.lines: list[str] = []
-        self._closed = False
-        self._changed = threading.Condition()
-
-        def allow_core() -> None:
-            resource.setrlimit(resource.RLIMIT_CORE,
-                               (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
-
-        self.popen = subprocess.Popen(args, env=env, cwd=cwd, stdout=subprocess.PIPE,
-                                      stderr=subprocess.STDOUT, stdin=subprocess.PIPE,
-                                      text=True, errors='replace',
-                                      preexec_fn=allow_core if core else None)
-        self.pid = self.popen.pid
-        self._reader = threading.Thread(target=self._read, daemon=True)
-        self._reader.start()
-
-    def _read(self) -> None:
-        assert self.popen.stdout is not None
-        for line in self.popen.stdout:
-            with self._changed:
-                self.lines.append(line.rstrip('\n'))
-                self._changed.notify_all()
-        with self._changed:
-            self._closed = True
-            self._changed.notify_all()
-
-    def wait_for(self, prefix: str, timeout: float, after: int = 0) -> Optional[str]:
-        """The first line from index ``after`` on that starts with ``prefix``, or None in time."""
-        deadline = time.monotonic() + timeout
-        index = after
-        with self._changed:
-            while True:
-                while index < len(self.lines):
-                    if self.lines[index].startswith(prefix):
-                        return self.lines[index]
-                    index += 1
-                remaining = deadline - time.monotonic()
-                if self._closed or remaining <= 0:
-                    return None
-                self._changed.wait(remaining)
-
-    def all(self, prefix: str) -> list[str]:
-        with self._changed:
-            return [line for line in self.lines if line.startswith(prefix)]
-
-    def send(self, line: str) -> None:
-        try:
-            assert self.popen.stdin is not None
-            self.popen.stdin.write(line + '\n')
-            self.popen.stdin.flush()
-        except (OSError, ValueError):
-            pass
-
-    def close_stdin(self) -> None:
-        try:
-            if self.popen.stdin is not None:
-                self.popen.stdin.close()
-        except OSError:
-            pass
-
-    def wait(self, timeout: float) -> Optional[int]:
-        try:
-            return self.popen.wait(timeout=timeout)
-        except subprocess.TimeoutExpired:
-            return None
-
-    def stop(self) -> Optional[int]:
-        """End the process: close stdin, then SIGINT, SIGTERM, SIGKILL; return its exit status."""
-        self.close_stdin()
-        steps = ((lambda: None, 3.0),
-                 (lambda: self.popen.send_signal(signal.SIGINT), 3.0),
-                 (self.popen.terminate, 3.0), (self.popen.kill, 10.0))
-        for action, grace in steps:
-            if self.popen.poll() is not None:
-                break
-            try:
-                action()
-            except ProcessLookupError:
-                break
-            self.wait(grace)
-        self._reader.join(5.0)
-        return self.popen.poll()
-
-    def tail(self, n: int = 30) -> str:
-        return f'--- {self.name} (rc={self.popen.poll()}) ---\n' + '\n'.join(self.lines[-n:])
+    Without ``depth``, its queues have rclpy's defaults, as an ordinary server's.
+    """
+    depth_args = [] if depth is None else ['--depth', str(depth)]
+    return [PYTHON, str(SERVER), action, str(period), '--pad', str(pad), *depth_args,
+            '--stats-every', '2']
 
 
 def plain_env(domain: int, **extra: str) -> dict[str, str]:
@@ -599,9 +367,13 @@ class Cell:
                 f'guard={"on" if self.guarded else "off"}')
 
 
-def run_cell(cell: Cell, opts: argparse.Namespace) -> dict[str, Any]:
-    """Run one cell and return what happened. Asserts nothing; never retries."""
-    domain = random.randint(1, 101)
+def run_cell(cell: Cell, opts: argparse.Namespace, domain: Optional[int] = None) -> dict[str, Any]:
+    """Run one cell and return what happened. Asserts nothing; never retries.
+
+    ``opts`` needs ``interval``, ``settle``, ``k`` and ``keep_cores``; ``domain`` is random
+    (1..101) unless given.
+    """
+    domain = domain or random.randint(1, 101)
     action = f'hz_{uuid.uuid4().hex[:10]}'
     workdir = tempfile.mkdtemp(prefix='cft_hazard_')
     started: list[Proc] = []
@@ -618,8 +390,7 @@ def run_cell(cell: Cell, opts: argparse.Namespace) -> dict[str, Any]:
 
     role = [PYTHON, str(THIS), '_role']
     try:
-        server = start('server', [*role, 'server', action, str(cell.period),
-                                  str(PAYLOADS[cell.payload]), '0'],
+        server = start('server', server_command(action, cell.period, PAYLOADS[cell.payload]),
                        server_env(domain, cell.guarded), cwd=workdir, core=True)
         status = server.wait_for('STATUS', 60.0)
         outcome['guard_status'] = status.split(' ', 2)[2] if status else None
@@ -646,7 +417,7 @@ def run_cell(cell: Cell, opts: argparse.Namespace) -> dict[str, Any]:
             line = events.wait_for('RESULT', 60.0 + cell.bound * per_event)
             if line is None:
                 result = {'error': f'{cell.event} client gave no result in time',
-                          'client_rc': events.popen.poll()}
+                          'client_rc': events.poll()}
             else:
                 words = line.split()
                 result = {'survived': words[1] == 'survived', 'events': int(words[2]),
@@ -657,13 +428,13 @@ def run_cell(cell: Cell, opts: argparse.Namespace) -> dict[str, Any]:
         if result.get('survived') is False:
             server.wait(120.0)  # a crashing server is gone from /proc before its core is written
         after_line = server.all('STATS')[-1] if server.all('STATS') else None
-        if server.popen.poll() is None:
+        if server.poll() is None:
             server.send('stats')
             after_line = server.wait_for('STATS', 5.0, after=len(server.lines)) or after_line
             outcome['server'] = 'alive'
         else:
             server.wait(10.0)
-            outcome['server'] = signal_name(server.popen.poll())
+            outcome['server'] = signal_name(server.poll())
         s0, s1 = stats_of(before), stats_of(after_line)
         if s0 and s1 and s1['t'] > s0['t']:
             outcome['feedback_per_s'] = round((s1['published'] - s0['published'])
@@ -673,23 +444,26 @@ def run_cell(cell: Cell, opts: argparse.Namespace) -> dict[str, Any]:
             outcome['guard_calls'] = s1.get('guard_calls')
         return outcome
     finally:
-        server_dead_before_stop = started and started[0].popen.poll() is not None
+        server_dead_before_stop = started and started[0].poll() is not None
         for proc in started:  # the server first, so that client exits are not counted
             proc.stop()
         if started and started[0].name == 'server':
             server = started[0]
-            if not server_dead_before_stop and server.popen.poll() not in (0, None):
-                outcome['server_at_stop'] = signal_name(server.popen.poll())
-            if server.popen.poll() is not None and server.popen.poll() < 0:
+            if not server_dead_before_stop and server.poll() not in (0, None):
+                outcome['server_at_stop'] = signal_name(server.poll())
+            if server.poll() is not None and server.poll() < 0:
                 core, frames = core_backtrace(workdir, server.pid, keep=opts.keep_cores)
                 outcome['core'] = core
                 outcome['backtrace'] = frames
                 if core is None:
                     outcome['backtrace_note'] = 'no core file (see core_pattern / ulimit)'
-            tails = [p.tail() for p in started if p.popen.poll() not in (0, None)
+            tails = [p.tail() for p in started if p.poll() not in (0, None)
                      or 'error' in outcome]
             if tails:
                 outcome['logs'] = tails
+            # Anything the guard itself said (it is silent when active on a known Fast DDS).
+            outcome['guard_messages'] = [line for line in server.lines
+                                         if line.startswith('[cft_action guard')]
         if not opts.keep_cores:
             shutil.rmtree(workdir, ignore_errors=True)
         outcome['cell_wall_s'] = round(time.monotonic() - t_cell, 1)
@@ -705,7 +479,7 @@ def run_exit_events(cell: Cell, opts: argparse.Namespace, action: str, domain: i
                     plain_env(domain))
         started.append(proc)
         ready = proc.wait_for('READY', 60.0 + 2.0 * opts.k)
-        if server.popen.poll() is not None or not _alive(server.pid):
+        if server.poll() is not None or not _alive(server.pid):
             proc.stop()
             return {'survived': False, 'events': i - 1, 'during': f'creation in process {i}',
                     'seconds': round(time.monotonic() - t0, 2)}
@@ -718,7 +492,7 @@ def run_exit_events(cell: Cell, opts: argparse.Namespace, action: str, domain: i
                     'events': i - 1, 'survived': False}
         started.remove(proc)
         time.sleep(max(opts.settle, 1.0))  # let the server process the removals
-        if server.popen.poll() is not None or not _alive(server.pid):
+        if server.poll() is not None or not _alive(server.pid):
             return {'survived': False, 'events': i, 'seconds': round(time.monotonic() - t0, 2)}
     return {'survived': True, 'events': cell.bound, 'seconds': round(time.monotonic() - t0, 2)}
 

@@ -2,7 +2,7 @@
 """The soak: one action server, eight client processes that keep coming and going, for minutes.
 
 One Fibonacci action server publishes feedback every 10 ms (100 Hz) to each running goal
-(``benchmarks/hazard.py``'s server, keep-last 1000 reliable queues). ``--clients`` (8) slots each
+(``demos/_server.py``, keep-last 1000 reliable queues). ``--clients`` (8) slots each
 run client processes one after the other until the time is up. A client process:
 
 1. creates its action client in the mode under test, waits for the server and completes one goal
@@ -55,11 +55,11 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from benchmarks.hazard import (Proc, core_backtrace, crash_site, machine_line,  # noqa: E402
-                               plain_env, server_env, signal_name, stats_of)
+from benchmarks.hazard import (core_backtrace, crash_site, machine_line,  # noqa: E402
+                               plain_env, server_command, server_env, signal_name, stats_of)
+from demos._proc import Proc  # noqa: E402
 
 THIS = Path(__file__).resolve()
-HAZARD = ROOT / 'benchmarks' / 'hazard.py'
 PYTHON = sys.executable
 MODES = ('client', 'goals', 'upstream')
 DEPTH = 1000
@@ -93,13 +93,15 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
                 order_max: int, cancel_p: float, period: float) -> int:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
+    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from test_msgs.action import Fibonacci
     from unique_identifier_msgs.msg import UUID
 
-    from benchmarks.hazard import _qos_kwargs
     rng = random.Random(seed)
     node = Node(f'soak_{uuid.uuid4().hex[:8]}')
-    qos = _qos_kwargs(DEPTH, 'sub')
+    profile = QoSProfile(depth=DEPTH, reliability=ReliabilityPolicy.RELIABLE)
+    qos = {name: profile for name in ('goal_service_qos_profile', 'result_service_qos_profile',
+                                      'cancel_service_qos_profile', 'feedback_sub_qos_profile')}
     if mode == 'upstream':
         from benchmarks._upstream import UpstreamEquivalentActionClient
         client = _counting(UpstreamEquivalentActionClient)(node, Fibonacci, action, **qos)
@@ -257,8 +259,7 @@ class Soak:
 
     def start_server(self) -> bool:
         self.server_dir = tempfile.mkdtemp(prefix='cft_soak_')
-        self.server = Proc('server', [PYTHON, str(HAZARD), '_role', 'server', self.action,
-                                      str(self.opts.period), '0', str(DEPTH)],
+        self.server = Proc('server', server_command(self.action, self.opts.period, 0, DEPTH),
                            server_env(self.domain, self.guarded), cwd=self.server_dir, core=True)
         ready = self.server.wait_for('READY', 60.0) is not None
         say(f'    server pid {self.server.pid} (guard {"on" if self.guarded else "off"}, '
@@ -269,14 +270,14 @@ class Soak:
         """Stop (or reap) the server; return its signal, stats and backtrace."""
         server = self.server
         assert server is not None
-        was_alive = server.popen.poll() is None
+        was_alive = server.poll() is None
         if was_alive:
             server.send('stats')
             server.wait_for('STATS', 5.0, after=len(server.lines))
         stats = [stats_of(line) for line in server.all('STATS')]
         stats = [s for s in stats if s]
         server.stop()
-        rc = server.popen.poll()
+        rc = server.poll()
         info: dict[str, Any] = {'rc': rc, 'signal': signal_name(rc), 'alive_at_stop': was_alive}
         if stats:
             first, last = stats[0], stats[-1]
@@ -346,7 +347,7 @@ class Soak:
         while time.monotonic() < end:
             time.sleep(0.5)
             assert self.server is not None
-            if self.server.popen.poll() is None and not self.server_dead_in_proc():
+            if self.server.poll() is None and not self.server_dead_in_proc():
                 last_alive = time.monotonic()
                 continue
             self.server.wait(120.0)  # until its core is written

@@ -116,20 +116,21 @@ def default_output() -> Path:
 def capturing_run_class() -> type[_harness.LoadRun]:
     """A load run that captures the first client's traffic in every phase (for ``--anatomy``)."""
     from demos import _netns
+    from demos._proc import Proc
 
     class CapturingRun(_harness.LoadRun):
-        def window_started(self, clients: list[_harness.Process],
+        def window_started(self, clients: list[Proc],
                            server_stats: dict[str, Any]) -> None:
             if not self.topology:
                 raise RuntimeError('--anatomy needs network namespaces (root and iproute2)')
             writers = server_stats['writers']
             argv = [sys.executable, '-u', str(REPO / 'benchmarks' / '_capture.py'),
                     _netns.INTERFACE, ','.join(writers['feedback']), ','.join(writers['status'])]
-            self._capture = _harness.Process(
-                self.topology.command(self.topology.clients[0], argv), self.env, 'capture')
+            self._capture = Proc('capture', self.topology.command(self.topology.clients[0], argv),
+                                 self.env)
             self._capture.expect('SNIFFING', 30)
 
-        def window_ended(self, clients: list[_harness.Process]) -> dict[str, Any]:
+        def window_ended(self, clients: list[Proc]) -> dict[str, Any]:
             anatomy = self._capture.request_json('stop', 'RESULT', timeout=30)
             self._capture.stop()
             return {'anatomy': anatomy}

@@ -20,20 +20,17 @@ the serialized size of one feedback message, and the result says so.
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 import platform
-import queue
 import random
 import statistics
-import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
 from demos import _netns
+from demos._proc import Proc
 
 HERE = Path(__file__).resolve().parent
 
@@ -48,6 +45,12 @@ CONFIG_LABELS = {
 #: Seconds of quiet after the last goal finished before a phase is accounted: longer than
 #: cft_action's FINISHED_GOAL_GRACE (1 s), after which ``goals`` mode drops finished goals' terms.
 SETTLE_S = 2.5
+
+#: Seconds a finished goal stays on the server. Every status message lists all goals the server
+#: keeps, and goes to every client: with rclpy's default of 900 s each phase of a run would carry
+#: the goals of all earlier phases, and later configurations would receive more status bytes.
+#: The load clients never ask for results, so nothing else depends on it.
+RESULT_TIMEOUT_S = 2
 
 #: Memory one client may spend on queued feedback; bounds the queue depth for large messages.
 _QUEUE_BYTES = 256 * 1024 * 1024
@@ -108,91 +111,6 @@ def queue_depth(spec: LoadSpec) -> int:
 
 # --- processes ------------------------------------------------------------------------------------
 
-class Process:
-    """A child process driven by lines on stdin and stdout, reaped with its resource usage."""
-
-    def __init__(self, argv: Sequence[str], env: dict[str, str], name: str) -> None:
-        """Start ``argv`` in a session of its own."""
-        self.name = name
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.stderr: list[str] = []
-        self.seen: list[str] = []  # the last stdout lines, for error messages
-        self.cpu_lifetime_s: Optional[float] = None
-        self.proc = subprocess.Popen(list(argv), stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                     stderr=subprocess.PIPE, text=True, env=env,
-                                     start_new_session=True)
-        threading.Thread(target=self._pump, args=(self.proc.stdout, self.lines.put),
-                         daemon=True).start()
-        threading.Thread(target=self._pump, args=(self.proc.stderr, self._keep_stderr),
-                         daemon=True).start()
-
-    @property
-    def pid(self) -> int:
-        """The process id (``ip netns exec`` execs, so it is the Python process's)."""
-        return self.proc.pid
-
-    @staticmethod
-    def _pump(stream: Any, sink: Callable[[str], None]) -> None:
-        for line in stream:
-            sink(line.rstrip('\n'))
-
-    def _keep_stderr(self, line: str) -> None:
-        self.stderr.append(line)
-        del self.stderr[:-50]
-
-    def expect(self, prefix: str, timeout: float) -> str:
-        """Return the next stdout line that starts with ``prefix``; fail after ``timeout`` s."""
-        deadline = time.monotonic() + timeout
-        while True:
-            remaining = deadline - time.monotonic()
-            if remaining <= 0 or (self.proc.poll() is not None and self.lines.empty()):
-                raise RuntimeError(
-                    f'{self.name}: no {prefix!r} within {timeout:.0f} s (exit {self.proc.poll()}); '
-                    f'stdout: {self.seen}; stderr: {self.stderr[-10:]}')
-            try:
-                line = self.lines.get(timeout=min(remaining, 0.2))
-            except queue.Empty:
-                continue
-            self.seen = self.seen[-9:] + [line]
-            if line.startswith(prefix):
-                return line
-
-    def send(self, line: str) -> None:
-        """Write one command line."""
-        self.proc.stdin.write(line + '\n')
-        self.proc.stdin.flush()
-
-    def request_json(self, command: str, reply: str, timeout: float = 30.0) -> dict[str, Any]:
-        """Send ``command`` and parse the JSON after ``reply`` in the answer."""
-        self.send(command)
-        return json.loads(self.expect(reply, timeout).split(' ', 1)[1])
-
-    def stop(self, timeout: float = 10.0) -> None:
-        """Close stdin, then SIGTERM, then SIGKILL; record the lifetime CPU seconds."""
-        try:
-            self.proc.stdin.close()
-        except OSError:
-            pass
-        deadline = time.monotonic() + timeout
-        signals = [(timeout / 2, self.proc.terminate), (timeout, self.proc.kill)]
-        while self.proc.returncode is None:
-            try:
-                pid, status, usage = os.wait4(self.proc.pid, os.WNOHANG)
-            except ChildProcessError:  # reaped elsewhere
-                self.proc.returncode = self.proc.poll()
-                break
-            if pid:
-                self.proc.returncode = os.waitstatus_to_exitcode(status)
-                self.cpu_lifetime_s = usage.ru_utime + usage.ru_stime
-                break
-            elapsed = timeout - (deadline - time.monotonic())
-            while signals and elapsed >= signals[0][0]:
-                signals.pop(0)[1]()
-            if time.monotonic() > deadline + 5:
-                break
-            time.sleep(0.05)
-
-
 # --- a run ----------------------------------------------------------------------------------------
 
 class LoadRun:
@@ -229,10 +147,11 @@ class LoadRun:
                                  f'({feedback_size(spec.pad)} B), no headers, status or discovery: '
                                  f'no network namespaces ({reason})')
         argv = [sys.executable, '-u', str(HERE / '_server.py'), self.action,
-                str(1.0 / spec.rate_hz), str(spec.pad), str(self.depth)]
+                str(1.0 / spec.rate_hz), '--pad', str(spec.pad), '--depth', str(self.depth),
+                '--result-timeout', str(RESULT_TIMEOUT_S)]
         if self.topology:
             argv = self.topology.command(self.topology.server, argv)
-        self.server = Process(argv, guard.environment(self.env), 'server')
+        self.server = Proc('server', argv, guard.environment(self.env))
         try:
             self.server.expect('READY', 60)
         except Exception:
@@ -251,14 +170,14 @@ class LoadRun:
 
     # --- one phase ----------------------------------------------------------------------------
 
-    def window_started(self, clients: list['Process'], server_stats: dict[str, Any]) -> None:
+    def window_started(self, clients: list[Proc], server_stats: dict[str, Any]) -> None:
         """Hook: the clients are ready and ``go`` comes next. For subclasses that observe."""
 
-    def window_ended(self, clients: list['Process']) -> dict[str, Any]:
+    def window_ended(self, clients: list[Proc]) -> dict[str, Any]:
         """Hook: the measured window is over; return entries to add to the phase's figures."""
         return {}
 
-    def _start_clients(self, config: str) -> list[Process]:
+    def _start_clients(self, config: str) -> list[Proc]:
         spec = self.spec
         clients = []
         for i in range(spec.clients):
@@ -266,10 +185,10 @@ class LoadRun:
                     str(spec.goals), str(spec.order), str(self.depth)]
             if self.topology:
                 argv = self.topology.command(self.topology.add_client(), argv)
-            clients.append(Process(argv, self.env, f'{config} client {i}'))
+            clients.append(Proc(f'{config} client {i}', argv, self.env))
         return clients
 
-    def _network(self, clients: list[Process]) -> list[Optional[dict[str, int]]]:
+    def _network(self, clients: list[Proc]) -> list[Optional[dict[str, int]]]:
         if not self.topology:
             return [None] * len(clients)
         return [_netns.interface_counters(c.pid) for c in clients]
@@ -297,7 +216,7 @@ class LoadRun:
                               f'{published}/{expected} feedback published')
             time.sleep(0.25)
 
-    def _wait_for_quiet(self, clients: list[Process], since: float) -> None:
+    def _wait_for_quiet(self, clients: list[Proc], since: float) -> None:
         """Wait until the clients' counters stop moving, at least SETTLE_S after ``since``."""
         deadline = time.monotonic() + self.spec.drain_timeout
         last: Optional[list[dict[str, Any]]] = None
@@ -355,8 +274,8 @@ class LoadRun:
             if self.topology:
                 # The namespaces of this phase's clients go with them; new ones come next phase.
                 self.topology.close_clients()
-        if self.server.proc.poll() is not None:
-            raise RuntimeError(f'the server died: {self.server.stderr[-20:]}')
+        if self.server.poll() is not None:
+            raise RuntimeError(f'the server died\n{self.server.tail()}')
         for report, client, b, a in zip(reports, clients, net_before, net_after):
             report['cpu_lifetime_s'] = client.cpu_lifetime_s
             if b is not None and a is not None:

@@ -1,42 +1,54 @@
-"""The load server: a Fibonacci action server whose feedback carries its publish time.
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""The Fibonacci action server of every demo, benchmark and test, in a process of its own.
 
-Usage: ``_server.py ACTION PERIOD_S PAD DEPTH``
+Usage: ``_server.py ACTION PERIOD_S [--pad N] [--depth N|all] [--result-timeout S]
+[--stats-every S]``
 
-Goal ``order`` is the number of feedback messages the goal gets; each feedback ``sequence`` is
-``[k, seconds, nanoseconds] + [0] * PAD``, the publish time from ``time.time_ns()``, so that a
-client on the same host can compute the latency from publish to its callback. The first feedback
-of a goal is published in the first line of ``execute`` (as a real server that reports progress at
+Goal ``order`` is the number of feedback messages the goal gets (a negative order is rejected;
+cancels are accepted). Each feedback ``sequence`` is ``[k, seconds, nanoseconds] + [0] * PAD``:
+the message's index in its goal, then its publish time from ``time.time_ns()``, so that a client
+on the same host can compute the latency from publish to its callback. The first feedback of a
+goal is published in the first line of ``execute`` (as a real server that reports progress at
 once), the others by a ticker thread every PERIOD_S, on an absolute schedule so that the rate stays
-put when a tick takes long. Every queue is DEPTH deep (see :func:`_harness.queue_depth`).
+put when a tick takes long. The result's ``sequence`` is ``[feedback messages published for the
+goal]``, so that a client can count what it lost, canceled goals included.
 
-Commands on stdin, one per line: ``stats`` replies ``STATS <json>`` with ``published`` (feedback
-messages), ``accepted`` (goals), ``active`` (goals still running), ``late_ticks`` (ticks that
-started more than a period late: the server could not keep the rate), ``intervals`` and
-``interval_s`` (feedback intervals of finished goals and the seconds they took), ``cpu_s``
-(user + system seconds of this process so far), ``guard`` (the server guard's status line) and
-``writers`` (the GUIDs of the feedback and status writers, in hex). End of input stops the
-server.
+Execute callbacks are coroutines, so one single-threaded executor serves any number of goals
+(rclpy's ActionServer dropped goal requests under a MultiThreadedExecutor here).
 
-The same design as ``tests/helpers/fib_server.py``, which cannot be reused as is: its queue depth
-is fixed, its feedback has no time stamp and its ticker drifts by the time a tick takes.
+Queues: ``--depth N`` makes every queue keep-last N, reliable; ``--depth all`` keep-all (with a
+1000-sample resource hint), which tests use so that nothing is dropped on a loaded machine; without
+``--depth``, rclpy's defaults (keep-last 10), as an ordinary server has.
+
+Lines it prints: ``STATUS <guard active> <guard status>`` and ``READY`` at start; ``STATS <json>``
+in reply to the command ``stats`` on stdin, and every ``--stats-every`` seconds if given (a crash
+watcher then has the counters from just before a crash). The JSON holds ``t`` (monotonic seconds),
+``published`` (feedback messages), ``accepted`` (goals), ``active`` (goals still running),
+``late_ticks`` (ticks that started more than a period late: the server could not keep the rate),
+``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
+``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
+line), ``guard_calls`` (its call counters) and ``writers`` (the GUIDs of the feedback and status
+writers, in hex). End of input stops the server.
 """
 
 from __future__ import annotations
 
+import argparse
 import array
 import json
+import os
 import resource
 import sys
 import threading
 import time
-from typing import Any
+from typing import Any, Optional
 
 import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from test_msgs.action import Fibonacci
 
@@ -45,18 +57,29 @@ from cft_action import guard
 #: Index of the first padding element in a feedback ``sequence``.
 HEADER = 3
 
-#: Seconds a finished goal stays on the server. Every status message lists all goals the server
-#: keeps, and goes to every client: with rclpy's default of 900 s each phase of a run would carry
-#: the goals of all earlier phases, and later configurations would receive more status bytes.
-#: The load clients never ask for results, so nothing else depends on it.
-RESULT_TIMEOUT_S = 2
+#: rclpy's default: finished goals (and their results) stay on the server for 15 minutes.
+DEFAULT_RESULT_TIMEOUT_S = 900
 
 
-class LoadServer:
+def queue_kwargs(depth: Optional[str]) -> dict[str, QoSProfile]:
+    """The ActionServer QoS arguments for ``--depth``: {} (rclpy's defaults) when None."""
+    if depth is None:
+        return {}
+    if depth == 'all':
+        profile = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
+                             reliability=ReliabilityPolicy.RELIABLE)
+    else:
+        profile = QoSProfile(depth=int(depth), reliability=ReliabilityPolicy.RELIABLE)
+    return {name: profile for name in ('goal_service_qos_profile', 'result_service_qos_profile',
+                                       'cancel_service_qos_profile', 'feedback_pub_qos_profile')}
+
+
+class TickingServer:
     """Action server that publishes ``order`` time-stamped feedback messages per goal."""
 
     def __init__(self, node: Node, executor: SingleThreadedExecutor, action: str, period: float,
-                 pad: int, depth: int) -> None:
+                 pad: int = 0, depth: Optional[str] = None,
+                 result_timeout: int = DEFAULT_RESULT_TIMEOUT_S) -> None:
         """Create the action server on ``node`` and start the ticker thread."""
         self.executor = executor
         self.period = period
@@ -72,15 +95,14 @@ class LoadServer:
         # Over finished goals: feedback intervals, and the seconds they took (the achieved rate).
         self.intervals = 0
         self.interval_s = 0.0
-        deep = QoSProfile(depth=depth, reliability=ReliabilityPolicy.RELIABLE)
-        ActionServer(node, Fibonacci, action, execute_callback=self.execute,
-                     goal_callback=self.on_goal,
-                     cancel_callback=lambda _: CancelResponse.ACCEPT,
-                     callback_group=ReentrantCallbackGroup(),
-                     goal_service_qos_profile=deep, result_service_qos_profile=deep,
-                     cancel_service_qos_profile=deep, feedback_pub_qos_profile=deep,
-                     result_timeout=RESULT_TIMEOUT_S)
-        threading.Thread(target=self.tick, daemon=True).start()
+        self.running = True
+        self.server = ActionServer(
+            node, Fibonacci, action, execute_callback=self.execute, goal_callback=self.on_goal,
+            cancel_callback=lambda _: CancelResponse.ACCEPT,
+            callback_group=ReentrantCallbackGroup(), result_timeout=result_timeout,
+            **queue_kwargs(depth))
+        self.ticker = threading.Thread(target=self.tick, daemon=True)
+        self.ticker.start()
 
     def on_goal(self, request: Fibonacci.Goal) -> GoalResponse:
         """Accept every goal of non-negative order."""
@@ -102,20 +124,21 @@ class LoadServer:
         if order > 0:
             self.publish(goal_handle, 0)
         done = Future()
+        entry = [goal_handle, 1 if order > 0 else 0, order, done, first, first]
         with self.lock:
             self.accepted += 1
-            self.active[id(goal_handle)] = [goal_handle, 1, order, done, first, first]
+            self.active[id(goal_handle)] = entry
         outcome = await done
         if outcome == 'canceled':
             goal_handle.canceled()
         else:
             goal_handle.succeed()
-        return Fibonacci.Result(sequence=[order])
+        return Fibonacci.Result(sequence=[entry[1]])
 
     def tick(self) -> None:
         """Every period, publish the next feedback of each running goal, or finish the goal."""
         due = time.monotonic()
-        while True:
+        while self.running:
             due += self.period
             delay = due - time.monotonic()
             if delay > 0:
@@ -152,32 +175,71 @@ class LoadServer:
         """Counters for the ``stats`` command."""
         usage = resource.getrusage(resource.RUSAGE_SELF)
         with self.lock:
-            return {'published': self.published, 'accepted': self.accepted,
-                    'active': len(self.active), 'late_ticks': self.late_ticks,
-                    'intervals': self.intervals, 'interval_s': self.interval_s,
-                    'cpu_s': usage.ru_utime + usage.ru_stime, 'guard': guard.status()}
+            return {'t': time.monotonic(), 'published': self.published,
+                    'accepted': self.accepted, 'active': len(self.active),
+                    'late_ticks': self.late_ticks, 'intervals': self.intervals,
+                    'interval_s': self.interval_s, 'cpu_s': usage.ru_utime + usage.ru_stime,
+                    'guard': guard.status(), 'guard_calls': guard.call_counts()}
 
 
-def main() -> None:
+def parse_args(argv: list[str]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
+    parser.add_argument('action')
+    parser.add_argument('period', type=float, help='feedback period, s')
+    parser.add_argument('--pad', type=int, default=0, help='int32 elements after the header')
+    parser.add_argument('--depth', help="every queue's depth, or 'all' (default: rclpy's)")
+    parser.add_argument('--result-timeout', type=int, default=DEFAULT_RESULT_TIMEOUT_S,
+                        help='seconds a finished goal stays on the server')
+    parser.add_argument('--stats-every', type=float, default=0.0,
+                        help='also print STATS every this many seconds')
+    return parser.parse_args(argv)
+
+
+def main(argv: list[str]) -> None:
     """Run the server until stdin closes."""
-    action, period, pad, depth = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+    args = parse_args(argv)
     rclpy.init()
-    node = Node('cft_load_server')
+    node = Node('cft_fib_server')
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    server = LoadServer(node, executor, action, period, pad, depth)
+    server = TickingServer(node, executor, args.action, args.period, args.pad, args.depth,
+                           args.result_timeout)
     # The RTPS GUIDs of the feedback and status writers, to tell their packets apart on the wire.
     writers = {name: [bytes(info.endpoint_gid).hex() for info in
-                      node.get_publishers_info_by_topic(f'{action}/_action/{name}')]
+                      node.get_publishers_info_by_topic(f'{args.action}/_action/{name}')]
                for name in ('feedback', 'status')}
-    threading.Thread(target=executor.spin, daemon=True).start()
+    out = threading.Lock()
+
+    def report() -> None:
+        line = 'STATS ' + json.dumps({**server.stats(), 'writers': writers})
+        with out:
+            print(line, flush=True)
+
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
+    stop = threading.Event()
+    if args.stats_every > 0:
+        def report_every() -> None:
+            while not stop.wait(args.stats_every):
+                report()
+        threading.Thread(target=report_every, daemon=True).start()
+    print('STATUS', guard.is_active(), guard.status(), flush=True)
     print('READY', flush=True)
     for line in sys.stdin:
         if line.strip() == 'stats':
-            print('STATS ' + json.dumps({**server.stats(), 'writers': writers}), flush=True)
+            report()
+    # Stop every thread that calls into rclpy, then leave without interpreter finalization: a
+    # daemon thread that re-enters Python during finalization is ended by pthread_exit, whose
+    # unwinding through rclpy's C++ frames calls std::terminate (SIGABRT): a crash watcher would
+    # count that as a crash of the server.
+    stop.set()
+    server.running = False
+    server.ticker.join(2.0)
     executor.shutdown(timeout_sec=2)
-    rclpy.shutdown()
+    spinner.join(2.0)
+    sys.stdout.flush()
+    os._exit(0)
 
 
 if __name__ == '__main__':
-    main()
+    main(sys.argv[1:])

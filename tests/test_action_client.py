@@ -16,14 +16,14 @@ import cft_action.client
 from cft_action import ActionClient, guard
 from cft_action.client import FINISHED_GOAL_GRACE
 from cft_action.filters import NEVER_MATCH
-from tests.support import ChildProcess, RosSession, unique_name
+from tests.support import RosSession, action_server, helper_process, unique_name
 
 PERIOD = 0.01  # 100 Hz feedback per goal
 
 
 def start_server(action, *, guarded=True, period=PERIOD):
     env = guard.environment() if guarded else None
-    return ChildProcess('fib_server.py', [action, period], env=env)
+    return action_server(action, period, env=env)
 
 
 @pytest.fixture
@@ -33,13 +33,13 @@ def server():
     child = start_server(action)
     try:
         yield action, child
-        assert child.proc.poll() is None, f'server died: {child.stderr_lines[-20:]}'
+        assert child.poll() is None, f'server died\n{child.tail()}'
     finally:
         child.stop()
 
 
 def run_clients(server, action, mode, clients, goals, order):
-    children = [ChildProcess('fib_client.py', [action, mode, goals, order])
+    children = [helper_process('fib_client.py', [action, mode, goals, order])
                 for _ in range(clients)]
     try:
         for child in children:
@@ -51,7 +51,7 @@ def run_clients(server, action, mode, clients, goals, order):
 
 
 def server_published(child):
-    return int(child.request('stats', 'STATS').split()[1])
+    return child.request_json('stats', 'STATS')['published']
 
 
 @pytest.mark.parametrize('mode, guarded', [
@@ -65,7 +65,7 @@ def test_three_clients_each_get_exactly_their_own_feedback(ros, mode, guarded):
     try:
         reports = run_clients(child, action, mode, clients, goals, order)
         published = server_published(child)
-        assert child.proc.poll() is None, 'server died'
+        assert child.poll() is None, 'server died'
     finally:
         child.stop()
     own = goals * order
@@ -101,7 +101,7 @@ def test_many_concurrent_goals_keep_the_filter_active(ros, mode, goals):
     child = start_server(action, period=0.5)
     try:
         [report] = run_clients(child, action, mode, 1, goals, 6)
-        assert child.proc.poll() is None, 'server died'
+        assert child.poll() is None, 'server died'
     finally:
         child.stop()
     assert report['active'], report['reason']

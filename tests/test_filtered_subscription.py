@@ -12,7 +12,7 @@ from std_msgs.msg import Float64, Int32, String
 from cft_action import (ContentFilterError, create_filtered_subscription, get_content_filter,
                         is_content_filter_supported, is_filtered, set_content_filter)
 from tests.helpers._polling import wait_until
-from tests.support import ChildProcess, RosSession, unique_name
+from tests.support import RosSession, helper_process, unique_name
 
 QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 BURST = 30
@@ -22,7 +22,7 @@ WORDS = ('hello', 'world', 'hello world')  # as tests/helpers/publisher.py sends
 @pytest.fixture
 def publisher():
     prefix = '/' + unique_name('cft_sub')
-    child = ChildProcess('publisher.py', [prefix])
+    child = helper_process('publisher.py', [prefix])
     try:
         yield prefix, child
     finally:
@@ -136,7 +136,7 @@ def test_filter_changed_while_executor_spins():
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     prefix = '/' + unique_name('cft_spin')
-    child = ChildProcess('publisher.py', [prefix])
+    child = helper_process('publisher.py', [prefix])
     try:
         received = []
         lock = threading.Lock()
@@ -166,7 +166,7 @@ def test_filter_changed_while_executor_spins():
             assert received == [BURST - 3, BURST - 2, BURST - 1]
         set_content_filter(subscription, 'data < 0 AND data > 0')
         assert spinner.is_alive()
-        assert child.proc.poll() is None
+        assert child.poll() is None
     finally:
         child.stop()
         ros.close()
@@ -181,7 +181,7 @@ def test_writer_filtered_samples_are_counted_as_lost(ros, capfd):
     history of 1000 the same burst reports nothing lost. Each subscription is alone on the topic.
     """
     prefix = '/' + unique_name('cft_lost')
-    child = ChildProcess('publisher.py', [prefix, 10])
+    child = helper_process('publisher.py', [prefix, 10])
     try:
         check_lost_counts(ros, prefix, child, capfd)
     finally:

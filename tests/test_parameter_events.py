@@ -9,7 +9,7 @@ import cft_action.parameter_events
 from cft_action import ContentFilterError, guard, is_filtered
 from cft_action.parameter_events import (ALL_NODES, NO_NODES, ParameterEventHandler,
                                          node_filter)
-from tests.support import ChildProcess, unique_name
+from tests.support import helper_process, unique_name
 
 BURST = 20
 SYNC_TIMEOUT = 15.0
@@ -52,15 +52,15 @@ def start_nodes():
     children = []
 
     def start(*names):
-        child = ChildProcess('param_nodes.py', names, env=guard.environment())
+        child = helper_process('param_nodes.py', names, env=guard.environment())
         children.append(child)
         return child
 
     yield start
     for child in children:
-        alive = child.proc.poll() is None
+        alive = child.poll() is None
         child.stop()
-        assert alive, f'param_nodes.py died: {child.stderr_lines[-20:]}'
+        assert alive, f'param_nodes.py died\n{child.tail()}'
 
 
 def sync(ros, handler, child, names, timeout=SYNC_TIMEOUT):

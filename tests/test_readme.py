@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from cft_action import guard
-from tests.support import ChildProcess
+from tests.support import action_server
 
 README = Path(__file__).parent.parent / 'README.md'
 
@@ -29,7 +29,7 @@ def test_tutorial_client_runs_unchanged_but_for_the_import(tmp_path):
     assert 'from rclpy.action import ActionClient' not in source
     script = tmp_path / 'tutorial_client.py'
     script.write_text(source)
-    server = ChildProcess('fib_server.py', ['fibonacci', 0.01], env=guard.environment())
+    server = action_server('fibonacci', 0.01, env=guard.environment())
     try:
         run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
                              timeout=60)

@@ -28,7 +28,8 @@ from test_msgs.msg import Arrays, BasicTypes, UnboundedSequences
 from cft_action import ContentFilterError, create_filtered_subscription, sql
 from cft_action.filters import dds_literals
 from cft_action.topic_tools import message_schema, message_to_yaml
-from tests.support import ChildProcess, unique_name
+from demos._proc import Proc
+from tests.support import helper_process, unique_name
 
 CLI = [sys.executable, '-m', 'cft_action.cli']
 # Runs the CLI as if the rmw implementation had no content filtering: the code path that a Jazzy
@@ -114,7 +115,7 @@ def run_cli(*args: str, command: Sequence[str] = CLI, timeout: float = 30) -> Cl
 @pytest.fixture
 def publisher():
     prefix = '/' + unique_name('cft_cli')
-    child = ChildProcess('publisher.py', [prefix])
+    child = helper_process('publisher.py', [prefix])
     try:
         yield prefix, child
     finally:
@@ -261,7 +262,7 @@ def test_echo_yaml_nested_arrays_and_no_arr():
         short = Cli('topic', 'echo', topic, 'test_msgs/msg/Arrays', '--filter',
                     'int32_values[1] < 0', '--once', '--no-arr', *RELIABLE)
         try:
-            publisher.wait(topic, 2)
+            publisher.wait_matched(topic, 2)
             publisher.publish(topic, serialize_message(msg))
             assert full.wait(20) == 0 and short.wait(20) == 0, full.log() + short.log()
         finally:
@@ -398,25 +399,18 @@ rclpy.shutdown()
 '''
 
 
-class AgreementPublisher(ChildProcess):
+class AgreementPublisher(Proc):
     """Publishes serialized messages of any type, sent to it in hex on stdin."""
 
-    def __init__(self) -> None:  # ChildProcess runs a file of tests/helpers; this runs a string
-        self.lines: queue.Queue[str] = queue.Queue()
-        self.stderr_lines: list[str] = []
-        self.proc = subprocess.Popen(
-            [sys.executable, '-u', '-c', AGREEMENT_PUBLISHER], stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
-        threading.Thread(target=self._pump, args=(self.proc.stdout, self.lines.put),
-                         daemon=True).start()
-        threading.Thread(target=self._pump, args=(self.proc.stderr, self.stderr_lines.append),
-                         daemon=True).start()
+    def __init__(self) -> None:
+        super().__init__('agreement publisher', [sys.executable, '-u', '-c', AGREEMENT_PUBLISHER],
+                         os.environ.copy())
         self.expect('READY', 30)
 
     def advertise(self, topic: str, type_name: str) -> None:
         self.request(f'advertise {topic} {type_name}', 'ADVERTISED')
 
-    def wait(self, topic: str, count: int) -> None:
+    def wait_matched(self, topic: str, count: int) -> None:
         assert self.request(f'wait {topic} {count}', 'MATCHED', timeout=40) == 'MATCHED'
 
     def publish(self, topic: str, data: bytes) -> None:
@@ -619,7 +613,7 @@ def test_client_fallback_agrees_with_dds_filter(ros):
                                          lambda m, into=everything: into.append(m), qos)
             plans[msg_type] = (topic, filters, everything)
         for topic, filters, _ in plans.values():
-            publisher.wait(topic, len(filters) + 1)
+            publisher.wait_matched(topic, len(filters) + 1)
 
         sent = {}
         for ident in range(MESSAGES):

@@ -1,0 +1,173 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""A child process driven by lines: the one process wrapper of the demos, benchmarks and tests.
+
+Every helper process of this project speaks the same way: it prints lines that start with a
+capitalised keyword (``READY``, ``STATS {...}``, ``RESULT ...``), reads commands from stdin, and
+ends when stdin closes. :class:`Proc` starts one, collects its merged stdout and stderr on a
+thread, and stops it for sure: every wait is bounded, and :meth:`Proc.stop` escalates to SIGKILL.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import resource
+import signal
+import subprocess
+import threading
+import time
+from typing import Any, Optional, Sequence
+
+
+class Proc:
+    """A child process whose merged stdout and stderr are read line by line by a thread."""
+
+    def __init__(self, name: str, argv: Sequence[str], env: dict[str, str], *,
+                 cwd: Optional[str] = None, core: bool = False) -> None:
+        """Start ``argv`` in a session of its own.
+
+        :param name: what messages call it.
+        :param core: allow a core dump (``RLIMIT_CORE`` unlimited), for a crash's backtrace.
+        """
+        self.name = name
+        self.lines: list[str] = []
+        self.cpu_lifetime_s: Optional[float] = None  # user + system seconds, once reaped
+        self._cursor = 0  # where the next expect() starts
+        self._closed = False
+        self._changed = threading.Condition()
+
+        def allow_core() -> None:
+            resource.setrlimit(resource.RLIMIT_CORE,
+                               (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
+
+        self.popen = subprocess.Popen(list(argv), env=env, cwd=cwd, stdin=subprocess.PIPE,
+                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                      text=True, errors='replace', start_new_session=True,
+                                      preexec_fn=allow_core if core else None)
+        self.pid = self.popen.pid
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self) -> None:
+        assert self.popen.stdout is not None
+        for line in self.popen.stdout:
+            with self._changed:
+                self.lines.append(line.rstrip('\n'))
+                self._changed.notify_all()
+        with self._changed:
+            self._closed = True
+            self._changed.notify_all()
+
+    def wait_for(self, prefix: str, timeout: float, after: int = 0) -> Optional[str]:
+        """The first line from index ``after`` on that starts with ``prefix``, or None.
+
+        Waits at most ``timeout`` seconds, and not past the end of the process's output.
+        """
+        found = self._find(prefix, timeout, after)
+        return None if found is None else self.lines[found]
+
+    def _find(self, prefix: str, timeout: float, after: int) -> Optional[int]:
+        deadline = time.monotonic() + timeout
+        index = after
+        with self._changed:
+            while True:
+                while index < len(self.lines):
+                    if self.lines[index].startswith(prefix):
+                        return index
+                    index += 1
+                remaining = deadline - time.monotonic()
+                if self._closed or remaining <= 0:
+                    return None
+                self._changed.wait(remaining)
+
+    def expect(self, prefix: str, timeout: float) -> str:
+        """The next line, after the last one expected, that starts with ``prefix``.
+
+        :raises TimeoutError: none came within ``timeout`` seconds; the message has the output.
+        """
+        found = self._find(prefix, timeout, self._cursor)
+        if found is None:
+            raise TimeoutError(f'{self.name}: no {prefix!r} within {timeout:g} s\n{self.tail()}')
+        self._cursor = found + 1
+        return self.lines[found]
+
+    def all(self, prefix: str) -> list[str]:
+        """Every line so far that starts with ``prefix``."""
+        with self._changed:
+            return [line for line in self.lines if line.startswith(prefix)]
+
+    def last(self, prefix: str) -> Optional[str]:
+        """The latest line so far that starts with ``prefix``, or None."""
+        with self._changed:
+            return next((line for line in reversed(self.lines) if line.startswith(prefix)), None)
+
+    def send(self, line: str) -> None:
+        """Write one command line; a process that is gone is not an error here."""
+        try:
+            assert self.popen.stdin is not None
+            self.popen.stdin.write(line + '\n')
+            self.popen.stdin.flush()
+        except (OSError, ValueError):
+            pass
+
+    def request(self, command: str, reply: str, timeout: float = 30.0) -> str:
+        """Send ``command`` and return the next line that starts with ``reply``."""
+        self.send(command)
+        return self.expect(reply, timeout)
+
+    def request_json(self, command: str, reply: str, timeout: float = 30.0) -> dict[str, Any]:
+        """Send ``command`` and parse the JSON after ``reply`` in the answer."""
+        return json.loads(self.request(command, reply, timeout).split(' ', 1)[1])
+
+    def close_stdin(self) -> None:
+        """End the input: the helper processes take that as the request to finish."""
+        try:
+            if self.popen.stdin is not None:
+                self.popen.stdin.close()
+        except OSError:
+            pass
+
+    def wait(self, timeout: float) -> Optional[int]:
+        """The exit status, or None if the process still runs after ``timeout`` seconds."""
+        deadline = time.monotonic() + timeout
+        while self.popen.returncode is None:
+            try:
+                pid, status, usage = os.wait4(self.pid, os.WNOHANG)
+            except ChildProcessError:  # reaped elsewhere
+                return self.popen.poll()
+            if pid:
+                self.popen.returncode = os.waitstatus_to_exitcode(status)
+                self.cpu_lifetime_s = usage.ru_utime + usage.ru_stime
+                break
+            if time.monotonic() >= deadline:
+                return None
+            time.sleep(0.02)
+        return self.popen.returncode
+
+    def poll(self) -> Optional[int]:
+        """The exit status, or None while it runs."""
+        return self.wait(0)
+
+    def stop(self, grace: float = 3.0) -> Optional[int]:
+        """End the process and return its exit status.
+
+        Closes stdin, then sends SIGINT, SIGTERM and SIGKILL, ``grace`` seconds apart.
+        """
+        self.close_stdin()
+        steps = ((lambda: None, grace),
+                 (lambda: self.popen.send_signal(signal.SIGINT), grace),
+                 (self.popen.terminate, grace), (self.popen.kill, 10.0))
+        for action, seconds in steps:
+            if self.poll() is not None:
+                break
+            try:
+                action()
+            except ProcessLookupError:
+                break
+            self.wait(seconds)
+        self._reader.join(5.0)
+        return self.popen.returncode
+
+    def tail(self, n: int = 30) -> str:
+        """The last ``n`` lines, under a header with the name and exit status, for messages."""
+        return f'--- {self.name} (rc={self.popen.returncode}) ---\n' + '\n'.join(self.lines[-n:])
