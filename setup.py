@@ -17,7 +17,9 @@ setup(
             sources=['cft_action/_guard.c'],
             libraries=['dl', 'pthread'],
             # Export only the three interposed Fast DDS members and the cft_guard_* C API.
-            extra_compile_args=['-O2', '-fvisibility=hidden', '-Wall'],
+            # -fexceptions: a C++ exception thrown by Fast DDS through a wrapper must still run
+            # the wrapper's unlock (a cleanup attribute), or the writer's stripe stays locked.
+            extra_compile_args=['-O2', '-fvisibility=hidden', '-fexceptions', '-Wall'],
         ),
     ],
 )

@@ -23,7 +23,7 @@
 //
 // It never aborts and prints nothing in the normal case (set CFT_GUARD_DEBUG=1 to see what it
 // does). It is only ever preloaded, never imported, and needs no Fast DDS headers.
-// Build by hand: cc -O2 -shared -fPIC -fvisibility=hidden -o libcftguard.so _guard.c -ldl -lpthread
+// Build by hand: cc -O2 -shared -fPIC -fvisibility=hidden -fexceptions -o libcftguard.so _guard.c -ldl -lpthread
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -164,6 +164,14 @@ static void unlock_writer(pthread_mutex_t *m) {
   if (--held_depth == 0) held_stripe = NULL;
   pthread_mutex_unlock(m);
 }
+
+// Holds the writer's stripe until the end of the enclosing block, however it is left: built with
+// -fexceptions, a C++ exception unwinding through the wrapper runs the cleanup too. Without it, a
+// throwing write would leave the stripe locked and hang the next thread that needs it (the
+// discovery thread, and with it participant shutdown).
+static void unlock_at_scope_end(pthread_mutex_t **m) { unlock_writer(*m); }
+#define LOCK_WRITER_IN_SCOPE(writer) \
+  pthread_mutex_t *scoped_lock_ __attribute__((cleanup(unlock_at_scope_end))) = lock_writer(writer)
 
 // ---- finding the real definitions -------------------------------------------------------------------
 static const char *base_name(const char *path) {
@@ -335,10 +343,8 @@ static void missing(struct family *f, int fn) {
     pcnc_fn real = (pcnc_fn)f->real[FN_PCNC];                                                   \
     if (real == NULL) { missing(f, FN_PCNC); return RETCODE_ERROR; }                            \
     if (f->state != CFT_GUARD_ACTIVE) return real(self, kind, data, params, handle);            \
-    pthread_mutex_t *m = lock_writer(self);                                                     \
-    uint32_t ret = real(self, kind, data, params, handle);                                      \
-    unlock_writer(m);                                                                           \
-    return ret;                                                                                 \
+    LOCK_WRITER_IN_SCOPE(self);                                                                 \
+    return real(self, kind, data, params, handle);                                              \
   }                                                                                             \
   void cft_prfi##SUFFIX(void *self, const void *guid, const void *info) {                       \
     struct family *f = ready(FAM);                                                              \
@@ -346,9 +352,8 @@ static void missing(struct family *f, int fn) {
     prfi_fn real = (prfi_fn)f->real[FN_PRFI];                                                   \
     if (real == NULL) { missing(f, FN_PRFI); return; }                                          \
     if (f->state != CFT_GUARD_ACTIVE) { real(self, guid, info); return; }                       \
-    pthread_mutex_t *m = lock_writer(self);                                                     \
+    LOCK_WRITER_IN_SCOPE(self);                                                                 \
     real(self, guid, info);                                                                     \
-    unlock_writer(m);                                                                           \
   }                                                                                             \
   void cft_rrf##SUFFIX(void *self, const void *guid) {                                          \
     struct family *f = ready(FAM);                                                              \
@@ -356,9 +361,8 @@ static void missing(struct family *f, int fn) {
     rrf_fn real = (rrf_fn)f->real[FN_RRF];                                                      \
     if (real == NULL) { missing(f, FN_RRF); return; }                                           \
     if (f->state != CFT_GUARD_ACTIVE) { real(self, guid); return; }                             \
-    pthread_mutex_t *m = lock_writer(self);                                                     \
+    LOCK_WRITER_IN_SCOPE(self);                                                                 \
     real(self, guid);                                                                           \
-    unlock_writer(m);                                                                           \
   }
 
 DEFINE_WRAPPERS(2, 0, PCNC2, PRFI2, RRF2)

@@ -157,6 +157,13 @@ def fake_fastdds(tmp_path_factory: pytest.TempPathFactory) -> dict[str, str]:
     subprocess.run([compiler, '-o', built['linked_main'], str(main_c), built['known'],
                     '-ldl'],
                    check=True, timeout=120, capture_output=True)
+    cxx = shutil.which('c++') or shutil.which('g++')
+    if cxx is not None:
+        (out / 'throwing').mkdir()
+        built['throwing'] = str(out / 'throwing' / 'libfastrtps.so.2.14')
+        subprocess.run([cxx, '-O2', '-shared', '-fPIC', '-Wl,-soname,libfastrtps.so.2.14', '-o',
+                        built['throwing'], str(HELPERS / 'guard_fake_throwing.cpp')],
+                       check=True, timeout=120, capture_output=True)
     return built
 
 
@@ -185,6 +192,18 @@ def test_guard_serializes_writes_with_filter_changes(fake_fastdds: dict[str, str
     writes, infos, removals, _ = report['calls']
     assert writes == report['writes'] and infos + removals == report['changes'], report
     assert GUARD_LINE not in stderr  # nothing printed in the normal case
+
+
+def test_guard_unlocks_a_writer_when_an_exception_unwinds_through_it(
+        fake_fastdds: dict[str, str]) -> None:
+    # Fast DDS is C++: a write that throws must not leave the writer's lock held, or the next
+    # filter change (the discovery thread) waits forever, and participant shutdown with it.
+    if 'throwing' not in fake_fastdds:
+        pytest.skip('no C++ compiler to build the throwing stand-in')
+    result = run([sys.executable, str(HELPERS / 'guard_fake_driver.py'), fake_fastdds['throwing'],
+                  '--throw'], guard.environment(plain_env()), timeout=60)
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    assert report == {'write_returned': [-1], 'remove_returned': True}, result.stderr
 
 
 def test_guard_debug_output(fake_fastdds: dict[str, str]) -> None:
