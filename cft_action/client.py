@@ -33,11 +33,18 @@ FEEDBACK_FILTER_ENV = 'CFT_ACTION_FEEDBACK_FILTER'
 _TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
                        GoalStatus.STATUS_ABORTED})
 
-#: Seconds a finished goal keeps its callback and filter term: feedback, status and result travel
-#: on different topics, so the last feedback may arrive after them. The callback is also kept
-#: until the feedback queue has been seen empty since the goal finished, so that feedback queued
-#: behind a result on a busy client is still delivered.
-FINISHED_GOAL_GRACE = 1.0
+#: Seconds a finished goal keeps its callback and filter term. Feedback, status and result travel
+#: on different topics, so the last feedback may arrive after them, and much later when a sample
+#: was lost on the way: a reliable reader then holds back everything after the gap until the
+#: writer's next heartbeat (every 3 s in Fast DDS) gets it resent. Measured on a loaded 2-core
+#: machine: a 200-goal burst had feedback delivered 2.8 s after its goals' terminal status, which
+#: a 1 s grace dropped (352 of 600 messages). Ten seconds cover three heartbeat rounds. The
+#: callback is also kept until the feedback queue has been seen empty since the goal finished.
+FINISHED_GOAL_GRACE = 10.0
+
+#: Seconds between checks for finished goals to release, and of idleness (no goal sent or
+#: finished) after which ``goals`` mode drops the terms of released goals from its filter.
+RELEASE_CHECK_PERIOD = 1.0
 
 
 class FeedbackFilterState(NamedTuple):
@@ -118,7 +125,7 @@ class ActionClient(_RclpyActionClient):
         self._feedback_dropped = 0
         self._install_before_first_wait(node, action_type, action_name, kwargs)
         self._release_timer = node.create_timer(
-            FINISHED_GOAL_GRACE, self._release_finished_goals, callback_group=self.callback_group)
+            RELEASE_CHECK_PERIOD, self._release_finished_goals, callback_group=self.callback_group)
         self._release_timer.cancel()
 
     # --- installation ------------------------------------------------------------------------------
@@ -357,7 +364,10 @@ class ActionClient(_RclpyActionClient):
                     self._feedback_callbacks.pop(goal_uuid, None)
                     if self._plan is not None:
                         self._plan.finish(goal_uuid)
-            if self._plan is not None and now - self._last_activity >= FINISHED_GOAL_GRACE:
+            # One shrink once every finished goal is released, not one per release check: each
+            # update is an event at the server's writer.
+            if (self._plan is not None and not self._finished
+                    and now - self._last_activity >= RELEASE_CHECK_PERIOD):
                 self._update(self._plan.shrink)
             if not self._finished and (self._plan is None or not self._plan.has_stale_terms()):
                 self._release_timer.cancel()

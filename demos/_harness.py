@@ -29,6 +29,7 @@ import time
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
+from cft_action.client import FINISHED_GOAL_GRACE
 from demos import _netns
 from demos._proc import Proc
 
@@ -43,8 +44,9 @@ CONFIG_LABELS = {
 }
 
 #: Seconds of quiet after the last goal finished before a phase is accounted: longer than
-#: cft_action's FINISHED_GOAL_GRACE (1 s), after which ``goals`` mode drops finished goals' terms.
-SETTLE_S = 2.5
+#: cft_action's FINISHED_GOAL_GRACE plus a release check, after which ``goals`` mode drops finished
+#: goals' terms (an update that belongs to the phase).
+SETTLE_S = FINISHED_GOAL_GRACE + 2.5
 
 #: Seconds a finished goal stays on the server. Every status message lists all goals the server
 #: keeps, and goes to every client: with rclpy's default of 900 s each phase of a run would carry

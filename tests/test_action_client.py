@@ -195,7 +195,7 @@ def test_cancel_and_reject_behave_as_rclpy_and_release_callbacks(ros, server, mo
     assert len(cancel.result().goals_canceling) == 1
     assert result_of(ros, handle).status == GoalStatus.STATUS_CANCELED
     # nobody asked for the rejected goal's result: its callback is released all the same
-    assert ros.spin_until(lambda: not client._feedback_callbacks, FINISHED_GOAL_GRACE * 4)
+    assert ros.spin_until(lambda: not client._feedback_callbacks, FINISHED_GOAL_GRACE + 15)
     state = client.feedback_filter_state
     assert state.live_goals == 0
     if mode == 'goals':
@@ -210,7 +210,7 @@ def test_finished_goals_are_released_without_asking_for_results(ros, server):
     assert all(h.accepted for h in handles)
     assert ros.spin_until(lambda: all(h.status == GoalStatus.STATUS_SUCCEEDED for h in handles),
                           15)
-    assert ros.spin_until(lambda: not client._feedback_callbacks, FINISHED_GOAL_GRACE * 5)
+    assert ros.spin_until(lambda: not client._feedback_callbacks, FINISHED_GOAL_GRACE + 15)
     assert ros.spin_until(lambda: client.feedback_filter_state.live_goals == 0, 5)
     state = client.feedback_filter_state
     assert state.active and state.updates <= 3
