@@ -9,7 +9,9 @@ run client processes one after the other until the time is up. A client process:
    of order 0 (a round trip that proves the endpoints matched; it has no feedback);
 2. sends 1..``--max-goals`` goals of ``--orders`` feedback messages each, with feedback callbacks,
    and cancels each with probability ``--cancel`` at a random moment;
-3. waits for every result, lingers one second for stragglers, reports, and exits normally.
+3. waits for every result, then until it has taken every feedback message the results say were
+   published (at most ``STRAGGLER_S``, 15 s: a lost sample is resent after the server's next
+   heartbeat), and half a second more for anything that should not arrive; reports; exits.
 
 Modes: ``client`` and ``goals`` (:class:`cft_action.ActionClient`) and ``upstream``
 (:class:`benchmarks._upstream.UpstreamEquivalentActionClient`, the Rolling algorithm: 16 ``%n``
@@ -63,6 +65,8 @@ THIS = Path(__file__).resolve()
 PYTHON = sys.executable
 MODES = ('client', 'goals', 'upstream')
 DEPTH = 1000
+#: Seconds a client waits, after its last result, for feedback still on the way (see role_client).
+STRAGGLER_S = 15.0
 
 
 def say(*words: object) -> None:
@@ -173,7 +177,31 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
         return complete
 
     finished = spin_until(step, 30.0 + order_max * period * 3)
-    end = time.monotonic() + 1.0  # stragglers, and anything that should not arrive
+
+    def published_to(goal: list) -> int:
+        """Feedback messages the server published for a goal, from its result (0 if none)."""
+        future, result = goal[2], goal[4]
+        if not future.done() or result is None or not result.done():
+            return 0
+        sequence = result.result().result.sequence
+        return int(sequence[0]) if len(sequence) else 0
+
+    expected = {goal[0]: published_to(goal) for goal in goals}
+
+    def all_taken() -> bool:
+        taken: dict[bytes, set[int]] = {}
+        for goal_uuid, k in client.soak_taken:
+            taken.setdefault(goal_uuid, set()).add(k)
+        return all(len(taken.get(u, ())) >= n for u, n in expected.items())
+
+    # Stragglers: a sample lost on the way is resent after the server's next heartbeat (3 s), and
+    # a reliable reader holds back what follows it until then. A client that left one second after
+    # its last result counted those as lost (hundreds per 10 minutes on a loaded machine), which is
+    # the harness leaving early, not the library losing them.
+    t_linger = time.monotonic()
+    spin_until(all_taken, STRAGGLER_S)
+    report['linger_s'] = round(time.monotonic() - t_linger, 2)
+    end = time.monotonic() + 0.5  # and anything that should not arrive
     while time.monotonic() < end:
         executor.spin_once(timeout_sec=0.05)
 
@@ -196,9 +224,8 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
         if not future.result().accepted:
             rejected += 1
             continue
-        response = result.result()
-        count = int(response.result.sequence[0]) if len(response.result.sequence) else 0
-        canceled += response.status == 5  # GoalStatus.STATUS_CANCELED
+        count = expected[goal_uuid]
+        canceled += result.result().status == 5  # GoalStatus.STATUS_CANCELED
         published += count
         got = {k for k in received.get(goal_uuid, set()) if 0 <= k < count}
         lost += count - len(got)
@@ -303,7 +330,7 @@ class Soak:
                     [PYTHON, str(THIS), '_role', 'client', self.action, self.mode, str(seed),
                      str(o.max_goals), str(o.orders[0]), str(o.orders[1]), str(o.cancel),
                      str(o.period)], plain_env(self.domain))
-        line = proc.wait_for('RESULT', 90.0 + o.orders[1] * o.period * 3)
+        line = proc.wait_for('RESULT', 90.0 + STRAGGLER_S + o.orders[1] * o.period * 3)
         rc = proc.wait(15.0)
         if rc is None:
             rc = proc.stop()
@@ -344,8 +371,12 @@ class Soak:
             thread.start()
             time.sleep(0.25)  # staggered starts
         last_alive = time.monotonic()
+        next_progress = t0 + 60.0
         while time.monotonic() < end:
             time.sleep(0.5)
+            if time.monotonic() >= next_progress:
+                next_progress += 60.0
+                self.progress(time.monotonic() - t0)
             assert self.server is not None
             if self.server.poll() is None and not self.server_dead_in_proc():
                 last_alive = time.monotonic()
@@ -368,6 +399,16 @@ class Soak:
             thread.join(120.0 + o.orders[1] * o.period * 3)
         final = self.finish_server(at_stop=True)
         return self.summarize(final, time.monotonic() - t0)
+
+    def progress(self, elapsed: float) -> None:
+        """One line a minute, so that a 10-minute configuration shows it is alive."""
+        with self.lock:
+            lives = list(self.lives)
+        total = {key: sum(life.get(key, 0) for life in lives) for key in ('lost', 'foreign')}
+        failed = sum('failed' in life for life in lives)
+        say(f'    {elapsed / 60:.0f}/{self.opts.minutes:g} min: {len(lives)} client lives '
+            f'({failed} failed), lost {total["lost"]}, foreign {total["foreign"]}, '
+            f'server crashes {len(self.crashes)}')
 
     def server_dead_in_proc(self) -> bool:
         from benchmarks.hazard import _alive
