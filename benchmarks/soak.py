@@ -6,7 +6,8 @@ One Fibonacci action server publishes feedback every 10 ms (100 Hz) to each runn
 run client processes one after the other until the time is up. A client process:
 
 1. creates its action client in the mode under test, waits for the server and completes one goal
-   of order 0 (a round trip that proves the endpoints matched; it has no feedback);
+   of order 0 (a round trip that proves the endpoints matched; it has no feedback), resent every
+   2 s up to 10 times: a goal response written before the server matched the client is lost;
 2. sends 1..``--max-goals`` goals of ``--orders`` feedback messages each, with feedback callbacks,
    and cancels each with probability ``--cancel`` at a random moment;
 3. waits for every result, then until it has taken every feedback message the results say were
@@ -132,10 +133,18 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
     if not client.wait_for_server(timeout_sec=20.0):
         say('RESULT', json.dumps({**report, 'failed': 'no server'}))
         return 0
-    probe_uuid = new_uuid()
-    probe = client.send_goal_async(Fibonacci.Goal(order=0), goal_uuid=probe_uuid)
-    # Named as in the measured runs: 'not accepted' is no goal response within 20 s, or a rejection.
-    if not spin_until(probe.done, 20.0) or not probe.result().accepted:
+    # A goal response written before the server's response writer matched this client is lost for
+    # good (volatile), as with plain rclpy: the probe is resent every 2 s, up to 10 times, with a
+    # new UUID each time (only the last probe is own; earlier ones have no feedback).
+    probe_uuids = []
+    for _ in range(10):
+        probe_uuids.append(new_uuid())
+        probe = client.send_goal_async(Fibonacci.Goal(order=0), goal_uuid=probe_uuids[-1])
+        if spin_until(probe.done, 2.0):
+            break
+    report['probes'] = len(probe_uuids)
+    # Named as in the measured runs: 'not accepted' is no goal response in time, or a rejection.
+    if not probe.done() or not probe.result().accepted:
         why = 'rejected' if probe.done() else 'no goal response in 20 s'
         say('RESULT', json.dumps({**report, 'failed': f'probe goal not accepted ({why})'}))
         return 0
@@ -205,7 +214,7 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
     while time.monotonic() < end:
         executor.spin_once(timeout_sec=0.05)
 
-    own = {bytes(probe_uuid.uuid)}
+    own = {bytes(u.uuid) for u in probe_uuids}
     own.update(goal[0] for goal in goals)
     received: dict[bytes, set[int]] = {}
     foreign = duplicates = 0
