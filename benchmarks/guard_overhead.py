@@ -45,7 +45,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from benchmarks.hazard import machine_line, plain_env, server_env  # noqa: E402
-from demos._proc import Proc  # noqa: E402
+from demos._proc import Proc, run_role  # noqa: E402
 
 THIS = Path(__file__).resolve()
 PYTHON = sys.executable
@@ -181,22 +181,8 @@ def role_ping(topic_out: str, topic_in: str, roundtrips: int, size: int) -> int:
     return 0
 
 
-def run_role(argv: list[str]) -> int:
-    import rclpy
-    role, args = argv[0], argv[1:]
-    rclpy.init()
-    try:
-        if role == 'sink':
-            return role_sink(args[0], float(args[1]))
-        if role == 'pub':
-            return role_pub(args[0], int(args[1]), int(args[2]))
-        if role == 'pong':
-            return role_pong(args[0], args[1], float(args[2]))
-        if role == 'ping':
-            return role_ping(args[0], args[1], int(args[2]), int(args[3]))
-        raise SystemExit(f'unknown role {role!r}')
-    finally:
-        rclpy.try_shutdown()
+#: The child processes of this script: ``guard_overhead.py _role NAME ARGS...``.
+ROLES = {'sink': role_sink, 'pub': role_pub, 'pong': role_pong, 'ping': role_ping}
 
 
 # --- per call, in C ------------------------------------------------------------------------------
@@ -354,7 +340,7 @@ def spread(values: list[float], fmt: str) -> str:
 def main(argv: Optional[list[str]] = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == '_role':
-        return run_role(argv[1:])
+        return run_role(argv[1:], ROLES)
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--messages', type=int, default=20000, help='publishes per throughput run')
     parser.add_argument('--roundtrips', type=int, default=2000, help='round trips per latency run')

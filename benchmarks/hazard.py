@@ -59,7 +59,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from demos._proc import Proc  # noqa: E402
+from demos._proc import Proc, run_role  # noqa: E402
 from demos._server import HEADER  # noqa: E402
 
 THIS = Path(__file__).resolve()
@@ -220,27 +220,9 @@ def role_exitproc(action: str, k: int, settle: float) -> int:
     return 0
 
 
-def run_role(argv: list[str]) -> int:
-    import rclpy
-    role, args = argv[0], argv[1:]
-    rclpy.init()
-    try:
-        if role == 'goal':
-            return role_goal(args[0])
-        if role == 'update':
-            return role_update(args[0], int(args[1]), float(args[2]), int(args[3]))
-        if role == 'destroy':
-            return role_destroy(args[0], int(args[1]), int(args[2]), float(args[3]))
-        if role == 'create':
-            return role_create(args[0], int(args[1]), int(args[2]), float(args[3]))
-        if role == 'exitproc':
-            return role_exitproc(args[0], int(args[1]), float(args[2]))
-        raise SystemExit(f'unknown role {role!r}')
-    finally:
-        try:
-            rclpy.try_shutdown()
-        except Exception:  # noqa: BLE001 (best effort at exit)
-            pass
+#: The child processes of this script: ``hazard.py _role NAME ARGS...``.
+ROLES = {'goal': role_goal, 'update': role_update, 'destroy': role_destroy,
+         'create': role_create, 'exitproc': role_exitproc}
 
 
 # ==================================================================================================
@@ -549,7 +531,7 @@ def machine_line() -> str:
 def main(argv: Optional[list[str]] = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == '_role':
-        return run_role(argv[1:])
+        return run_role(argv[1:], ROLES)
     parser = argparse.ArgumentParser(
         description=__doc__.split('\n\n')[0],
         formatter_class=argparse.RawDescriptionHelpFormatter,

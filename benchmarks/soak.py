@@ -60,7 +60,7 @@ if str(ROOT) not in sys.path:
 
 from benchmarks.hazard import (core_backtrace, crash_site, machine_line,  # noqa: E402
                                plain_env, server_command, server_env, signal_name, stats_of)
-from demos._proc import Proc  # noqa: E402
+from demos._proc import Proc, run_role  # noqa: E402
 
 THIS = Path(__file__).resolve()
 PYTHON = sys.executable
@@ -260,17 +260,8 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
     return 0
 
 
-def run_role(argv: list[str]) -> int:
-    import rclpy
-    role, args = argv[0], argv[1:]
-    rclpy.init()
-    try:
-        if role == 'client':
-            return role_client(args[0], args[1], int(args[2]), int(args[3]), int(args[4]),
-                               int(args[5]), float(args[6]), float(args[7]))
-        raise SystemExit(f'unknown role {role!r}')
-    finally:
-        rclpy.try_shutdown()
+#: The child processes of this script: ``soak.py _role client ARGS...``.
+ROLES = {'client': role_client}
 
 
 # ==================================================================================================
@@ -492,7 +483,7 @@ def table(results: list[dict[str, Any]]) -> str:
 def main(argv: Optional[list[str]] = None) -> int:
     argv = sys.argv[1:] if argv is None else argv
     if argv and argv[0] == '_role':
-        return run_role(argv[1:])
+        return run_role(argv[1:], ROLES)
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--minutes', type=float, default=10.0, help='per configuration')
     parser.add_argument('--modes', nargs='+', choices=MODES, default=list(MODES))

@@ -1,14 +1,16 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
-"""A child process driven by lines: the one process wrapper of the demos, benchmarks and tests.
+"""Child processes driven by lines: the one process wrapper of the demos, benchmarks and tests.
 
 Every helper process of this project speaks the same way: it prints lines that start with a
 capitalised keyword (``READY``, ``STATS {...}``, ``RESULT ...``), reads commands from stdin, and
 ends when stdin closes. :class:`Proc` starts one, collects its merged stdout and stderr on a
 thread, and stops it for sure: every wait is bounded, and :meth:`Proc.stop` escalates to SIGKILL.
+:func:`run_role` is the other side: the entry point of a script whose roles run as such processes.
 """
 
 from __future__ import annotations
 
+import inspect
 import json
 import os
 import resource
@@ -16,7 +18,8 @@ import signal
 import subprocess
 import threading
 import time
-from typing import Any, Optional, Sequence
+import typing
+from typing import Any, Callable, Optional, Sequence
 
 
 class Proc:
@@ -171,3 +174,27 @@ class Proc:
     def tail(self, n: int = 30) -> str:
         """The last ``n`` lines, under a header with the name and exit status, for messages."""
         return f'--- {self.name} (rc={self.popen.returncode}) ---\n' + '\n'.join(self.lines[-n:])
+
+
+def run_role(argv: Sequence[str], roles: dict[str, Callable[..., int]]) -> int:
+    """Run the role ``argv[0]`` with the arguments ``argv[1:]``, inside an rclpy context.
+
+    Each argument is converted by the role function's type hint for its parameter (``str``,
+    ``int``, ``float``). Returns the role's exit status; rclpy is shut down however it ends.
+    """
+    import rclpy
+    name, args = argv[0], argv[1:]
+    if name not in roles:
+        raise SystemExit(f'unknown role {name!r}; roles: {", ".join(roles)}')
+    role = roles[name]
+    hints = typing.get_type_hints(role)
+    values = [hints.get(param, str)(arg)
+              for param, arg in zip(inspect.signature(role).parameters, args)]
+    rclpy.init()
+    try:
+        return role(*values)
+    finally:
+        try:
+            rclpy.try_shutdown()
+        except Exception:  # noqa: BLE001 (best effort at exit)
+            pass

@@ -13,9 +13,13 @@ from __future__ import annotations
 import os
 import sys
 import time
+from pathlib import Path
 
 import rclpy
 from rclpy.node import Node
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # run as a script: the repository
+from demos._proc import run_role  # noqa: E402
 
 TOPIC = os.environ.get('GUARD_TOPIC', 'guard_chatter')
 
@@ -59,21 +63,8 @@ def listener(expect: int, timeout: float) -> int:
     return 0
 
 
-def main(argv: list[str]) -> int:
-    role, args = argv[0], argv[1:]
-    rclpy.init()
-    try:
-        if role == 'talker':
-            return talker(int(args[0]))
-        if role == 'listener':
-            return listener(int(args[0]), float(args[1]))
-        raise SystemExit(f'unknown role {role!r}')
-    finally:
-        try:
-            rclpy.try_shutdown()
-        except Exception:  # noqa: BLE001 (best effort at exit)
-            pass
+ROLES = {'talker': talker, 'listener': listener}
 
 
 if __name__ == '__main__':
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(run_role(sys.argv[1:], ROLES))
