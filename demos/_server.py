@@ -2,7 +2,7 @@
 """The Fibonacci action server of every demo, benchmark and test, in a process of its own.
 
 Usage: ``_server.py ACTION PERIOD_S [--pad N] [--depth N|all] [--result-timeout S]
-[--stats-every S]``
+[--stats-every S] [--late-feedback S]``
 
 Goal ``order`` is the number of feedback messages the goal gets (a negative order is rejected;
 cancels are accepted). Each feedback ``sequence`` is ``[k, seconds, nanoseconds] + [0] * PAD``:
@@ -11,7 +11,9 @@ on the same host can compute the latency from publish to its callback. The first
 goal is published in the first line of ``execute`` (as a real server that reports progress at
 once), the others by a ticker thread every PERIOD_S, on an absolute schedule so that the rate stays
 put when a tick takes long. The result's ``sequence`` is ``[feedback messages published for the
-goal]``, so that a client can count what it lost, canceled goals included.
+goal]``, so that a client can count what it lost, canceled goals included. With
+``--late-feedback S``, a goal that succeeded gets one more feedback message (``k = order``) S
+seconds after its result, the way a sample lost on the way and resent arrives at a client.
 
 Execute callbacks are coroutines, so one single-threaded executor serves any number of goals
 (rclpy's ActionServer dropped goal requests under a MultiThreadedExecutor here).
@@ -79,10 +81,12 @@ class TickingServer:
 
     def __init__(self, node: Node, executor: SingleThreadedExecutor, action: str, period: float,
                  pad: int = 0, depth: Optional[str] = None,
-                 result_timeout: int = DEFAULT_RESULT_TIMEOUT_S) -> None:
+                 result_timeout: int = DEFAULT_RESULT_TIMEOUT_S, late_feedback: float = 0.0) -> None:
         """Create the action server on ``node`` and start the ticker thread."""
         self.executor = executor
         self.period = period
+        self.late_feedback = late_feedback
+        self.late: list[tuple[float, Any, int]] = []  # (due, goal handle, k) after a success
         # A template copied per message: building a 2500-element list each time would cost the
         # server more CPU than the publish itself.
         self.template = array.array('i', [0] * (HEADER + pad))
@@ -157,6 +161,8 @@ class TickingServer:
                     finished.append((key, done, 'canceled'))
                 elif k >= order:
                     finished.append((key, done, 'succeeded'))
+                    if self.late_feedback > 0 and order > 0:
+                        self.late.append((time.monotonic() + self.late_feedback, goal_handle, k))
                 else:
                     self.publish(goal_handle, k)
                     entry[1] = k + 1
@@ -168,8 +174,17 @@ class TickingServer:
                     self.interval_s += entry[5] - entry[4]
             for _, done, outcome in finished:
                 done.set_result(outcome)
+            self.publish_late()
             if finished:
                 self.executor.wake()
+
+    def publish_late(self) -> None:
+        """Publish the feedback due after their goals' results (``--late-feedback``)."""
+        now = time.monotonic()
+        due = [item for item in self.late if item[0] <= now]
+        self.late = [item for item in self.late if item[0] > now]
+        for _, goal_handle, k in due:
+            self.publish(goal_handle, k)
 
     def stats(self) -> dict[str, Any]:
         """Counters for the ``stats`` command."""
@@ -192,6 +207,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help='seconds a finished goal stays on the server')
     parser.add_argument('--stats-every', type=float, default=0.0,
                         help='also print STATS every this many seconds')
+    parser.add_argument('--late-feedback', type=float, default=0.0,
+                        help='publish one more feedback (k = order) this many seconds after a '
+                             "goal's success, as a sample resent after a loss arrives late")
     return parser.parse_args(argv)
 
 
@@ -203,7 +221,7 @@ def main(argv: list[str]) -> None:
     executor = SingleThreadedExecutor()
     executor.add_node(node)
     server = TickingServer(node, executor, args.action, args.period, args.pad, args.depth,
-                           args.result_timeout)
+                           args.result_timeout, args.late_feedback)
     # The RTPS GUIDs of the feedback and status writers, to tell their packets apart on the wire.
     writers = {name: [bytes(info.endpoint_gid).hex() for info in
                       node.get_publishers_info_by_topic(f'{args.action}/_action/{name}')]

@@ -66,14 +66,16 @@ def helper_process(script: str, args: Sequence[object] = (), *, env: Optional[di
 
 
 def action_server(action: str, period: float, *, env: Optional[dict] = None,
-                  timeout: float = 30.0) -> Proc:
+                  late_feedback: float = 0.0, timeout: float = 30.0) -> Proc:
     """The project's Fibonacci action server (``demos/_server.py``) with keep-all queues.
 
     rclpy's default depth of 10 drops requests when many clients send goals at once (measured:
     4 of 15 goals lost with 3 clients), and any keep-last queue drops when a client on a loaded
-    machine lags: these tests are about filtering, so every queue keeps all.
+    machine lags: these tests are about filtering, so every queue keeps all. ``late_feedback``:
+    see the server's ``--late-feedback``.
     """
-    argv = [sys.executable, '-u', str(SERVER), action, str(period), '--depth', 'all']
+    argv = [sys.executable, '-u', str(SERVER), action, str(period), '--depth', 'all',
+            '--late-feedback', str(late_feedback)]
     return _started(Proc('server', argv, env or os.environ.copy()), 'READY', timeout)
 
 

@@ -7,6 +7,7 @@ import uuid
 
 import pytest
 from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient as RclpyActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.qos import QoSProfile
 from test_msgs.action import Fibonacci
@@ -145,6 +146,32 @@ def result_of(ros, goal_handle):
     future = goal_handle.get_result_async()
     assert ros.spin_until(future.done, 30)
     return future.result()
+
+
+def test_feedback_that_arrives_seconds_after_the_result_is_delivered(ros):
+    """A sample lost on the way is resent after the writer's next heartbeat (3 s in Fast DDS), so
+    feedback can arrive seconds after its goal's result: the client keeps the callback for it.
+    Plain rclpy drops it, since it forgets the callback when the result arrives."""
+    action = '/' + unique_name('fib')
+    late_s = 3.0
+    child = action_server(action, PERIOD, env=guard.environment(), late_feedback=late_s)
+    try:
+        clients = {'cft': make_client(ros, action),
+                   'rclpy': RclpyActionClient(ros.node, Fibonacci, action)}
+        assert clients['rclpy'].wait_for_server(timeout_sec=20)
+        assert round_trip(ros, clients['rclpy'])
+        received = {name: [] for name in clients}
+        for name, client in clients.items():
+            handle = send(ros, client, 2, feedback_callback=received[name].append)
+            assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+        ros.spin_until(lambda: len(received['cft']) == 3, late_s + 10)
+        ros.spin_for(0.5)
+    finally:
+        child.stop()
+    ks = {name: [m.feedback.sequence[0] for m in messages] for name, messages in received.items()}
+    assert ks['cft'] == [0, 1, 2]
+    assert clients['cft'].feedback_filter_state.feedback_dropped == 0
+    assert ks['rclpy'] == [0, 1], 'plain rclpy delivered feedback after the result'
 
 
 def test_default_mode_is_client_with_a_tag_and_a_fixed_filter(ros, server):
