@@ -14,7 +14,8 @@ run client processes one after the other until the time is up. A client process:
    published (at most ``STRAGGLER_S``, 15 s: a lost sample is resent after the server's next
    heartbeat), and half a second more for anything that should not arrive; reports; exits.
 
-Modes: ``client`` and ``goals`` (:class:`cft_action.ActionClient`) and ``upstream``
+Modes: ``client`` and ``goals`` (:class:`cft_action.ActionClient`), ``rclpy`` (plain
+:class:`rclpy.action.ActionClient`, the baseline, only when asked for) and ``upstream``
 (:class:`benchmarks._upstream.UpstreamEquivalentActionClient`, the Rolling algorithm: 16 ``%n``
 parameters per goal, a goal added on acceptance and removed on its result, ``""`` after the last
 goal, disabled for good past 6 goals). Each mode runs with the server guard ``on`` and ``off``.
@@ -110,6 +111,9 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
     if mode == 'upstream':
         from benchmarks._upstream import UpstreamEquivalentActionClient
         client = _counting(UpstreamEquivalentActionClient)(node, Fibonacci, action, **qos)
+    elif mode == 'rclpy':
+        from rclpy.action import ActionClient as RclpyActionClient
+        client = _counting(RclpyActionClient)(node, Fibonacci, action, **qos)
     else:
         from cft_action import ActionClient
         client = _counting(ActionClient)(node, Fibonacci, action, feedback_filter=mode, **qos)
@@ -124,7 +128,7 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
         return predicate()
 
     def new_uuid() -> UUID:
-        if mode == 'upstream':
+        if mode in ('upstream', 'rclpy'):
             return UUID(uuid=list(os.urandom(16)))
         return client.new_goal_uuid()
 
@@ -247,6 +251,8 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
     if mode == 'upstream':
         filter_sets = client.filter_sets
         filter_note = client.disabled_reason
+    elif mode == 'rclpy':
+        filter_sets, filter_note = 0, 'plain rclpy: no filter'
     else:
         state = client.feedback_filter_state
         filter_sets = (1 if state.active or state.updates else 0) + state.updates
@@ -490,7 +496,8 @@ def main(argv: Optional[list[str]] = None) -> int:
         return run_role(argv[1:], ROLES)
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--minutes', type=float, default=10.0, help='per configuration')
-    parser.add_argument('--modes', nargs='+', choices=MODES, default=list(MODES))
+    parser.add_argument('--modes', nargs='+', choices=[*MODES, 'rclpy'], default=list(MODES),
+                        help="'rclpy' (plain rclpy.action.ActionClient, the baseline) on request")
     parser.add_argument('--guard', nargs='+', choices=['on', 'off'], default=['on', 'off'])
     parser.add_argument('--runs', type=int, default=1, help='runs of each configuration')
     parser.add_argument('--clients', type=int, default=8, help='client processes at a time')
