@@ -62,6 +62,7 @@ if str(ROOT) not in sys.path:
 from benchmarks.hazard import (core_backtrace, crash_site, machine_line,  # noqa: E402
                                plain_env, server_command, server_env, signal_name, stats_of)
 from demos._proc import Proc, run_role  # noqa: E402
+from demos._server import queue_kwargs  # noqa: E402
 
 THIS = Path(__file__).resolve()
 PYTHON = sys.executable
@@ -99,15 +100,12 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
                 order_max: int, cancel_p: float, period: float) -> int:
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
-    from rclpy.qos import QoSProfile, ReliabilityPolicy
     from test_msgs.action import Fibonacci
     from unique_identifier_msgs.msg import UUID
 
     rng = random.Random(seed)
     node = Node(f'soak_{uuid.uuid4().hex[:8]}')
-    profile = QoSProfile(depth=DEPTH, reliability=ReliabilityPolicy.RELIABLE)
-    qos = {name: profile for name in ('goal_service_qos_profile', 'result_service_qos_profile',
-                                      'cancel_service_qos_profile', 'feedback_sub_qos_profile')}
+    qos = queue_kwargs(str(DEPTH), 'sub')
     if mode == 'upstream':
         from benchmarks._upstream import UpstreamEquivalentActionClient
         client = _counting(UpstreamEquivalentActionClient)(node, Fibonacci, action, **qos)

@@ -63,8 +63,11 @@ HEADER = 3
 DEFAULT_RESULT_TIMEOUT_S = 900
 
 
-def queue_kwargs(depth: Optional[str]) -> dict[str, QoSProfile]:
-    """The ActionServer QoS arguments for ``--depth``: {} (rclpy's defaults) when None."""
+def queue_kwargs(depth: Optional[str], side: str = 'pub') -> dict[str, QoSProfile]:
+    """The QoS arguments for ``--depth``: {} (rclpy's defaults) when None.
+
+    ``side`` is ``'pub'`` for an ActionServer, ``'sub'`` for an ActionClient (its feedback queue).
+    """
     if depth is None:
         return {}
     if depth == 'all':
@@ -72,8 +75,9 @@ def queue_kwargs(depth: Optional[str]) -> dict[str, QoSProfile]:
                              reliability=ReliabilityPolicy.RELIABLE)
     else:
         profile = QoSProfile(depth=int(depth), reliability=ReliabilityPolicy.RELIABLE)
-    return {name: profile for name in ('goal_service_qos_profile', 'result_service_qos_profile',
-                                       'cancel_service_qos_profile', 'feedback_pub_qos_profile')}
+    names = ('goal_service_qos_profile', 'result_service_qos_profile',
+             'cancel_service_qos_profile', f'feedback_{side}_qos_profile')
+    return {name: profile for name in names}
 
 
 class TickingServer:
@@ -81,7 +85,8 @@ class TickingServer:
 
     def __init__(self, node: Node, executor: SingleThreadedExecutor, action: str, period: float,
                  pad: int = 0, depth: Optional[str] = None,
-                 result_timeout: int = DEFAULT_RESULT_TIMEOUT_S, late_feedback: float = 0.0) -> None:
+                 result_timeout: int = DEFAULT_RESULT_TIMEOUT_S,
+                 late_feedback: float = 0.0) -> None:
         """Create the action server on ``node`` and start the ticker thread."""
         self.executor = executor
         self.period = period
