@@ -30,7 +30,7 @@ Examples::
 
     python benchmarks/hazard.py --events update --periods 0.0005 --payloads small --updates 50
     python benchmarks/hazard.py --events update destroy --periods 0.0005 0.01 --payloads small \\
-        --updates 200 --destroys 30 --json /tmp/hazard.json
+        --updates 200 --destroys 30 --json hazard.json
 
 The child processes are this same file: ``hazard.py _role ROLE ARGS...``.
 """

@@ -2,7 +2,7 @@
 """What an action client's feedback filter must match, and when it must change: no ROS import.
 
 Every change of the filter is an event at the server's writer, and such events can crash a Fast
-DDS server (NOTES.md section 4), so this planner is built to change the filter as rarely as it can:
+DDS server (docs/INTERNALS.md section 10), so this planner is built to change the filter as rarely as it can:
 
 - ``client`` mode matches a random tag that starts every UUID this client generates. The filter is
   fixed for the life of the client; only caller-supplied UUIDs without the tag need an exact term.

@@ -37,7 +37,7 @@ can hide a ``use_sim_time`` change from the node's clock.
 The hazard. Each filter change, and the creation and destruction of the filtered reader, is an
 event at every ``/parameter_events`` writer in the domain, that is, at every node with parameter
 events enabled, not only at the watched ones. With Fast DDS 2.14 such an event can crash a process
-that publishes at that moment (eProsima/Fast-DDS#4878, NOTES.md section 4). Measured with
+that publishes at that moment (eProsima/Fast-DDS#4878, docs/INTERNALS.md section 10). Measured with
 ``demos/parameter_events.py --soak``: 20 nodes in one process, each changing a parameter at 10 Hz,
 crashed within 2, 10 and 102 updates (one every 50 ms); under :mod:`cft_action.guard` they survived
 500. This handler therefore changes its filter only when the set of watched nodes changes; where

@@ -13,12 +13,12 @@ carries 200 events per second. Two handler processes watch the same 2 of those n
 Each prints the events its subscription received, the parameter callbacks that fired, and the CPU
 time its whole process used (all threads, DDS included) over the same measurement window.
 
-    /tmp/v/bin/python demos/parameter_events.py            # about 35 s
-    /tmp/v/bin/python demos/parameter_events.py --seconds 5 --soak 250 --soak-period 0.05 --no-guard
+    .venv/bin/python demos/parameter_events.py            # about 35 s
+    .venv/bin/python demos/parameter_events.py --seconds 5 --soak 250 --soak-period 0.05 --no-guard
 
 Every filter change (and every filtered reader that comes or goes) is an event at every
 ``/parameter_events`` writer, that is, at every node; with Fast DDS 2.14 such an event can crash a
-process that is publishing at that moment (eProsima/Fast-DDS#4878, NOTES.md section 4). So the
+process that is publishing at that moment (eProsima/Fast-DDS#4878, docs/INTERNALS.md section 10). So the
 nodes' process runs under :mod:`cft_action.guard` unless ``--no-guard`` is given. ``--soak N`` then
 changes the filtered handler's node set 2*N times while the nodes keep publishing, and reports
 whether the nodes' process survived: run it with ``--no-guard`` to see the hazard.

@@ -7,7 +7,7 @@ from cft_action.filters import (any_of, dds_literal, goal_filter_expression, nev
 
 
 @pytest.mark.parametrize('value, literal', [
-    # the eight cases of seed 002
+    # the literal forms Fast DDS accepts (docs/INTERNALS.md section 5)
     ('hello', "'hello'"),                # bare string: quoted
     ("'hello'", "'hello'"),              # already quoted: unchanged
     ("`hello'", "`hello'"),              # backtick-quoted (Fast DDS closes with '): unchanged
