@@ -5,8 +5,8 @@
 feedback subscription receives only the feedback of its own goals.
 """
 
-from cft_action._rcl import ContentFilterError
 from cft_action.client import ActionClient, FeedbackFilterState
+from cft_action.errors import CftActionError, ContentFilterError, InvalidArgumentError
 from cft_action.parameter_events import ParameterEventFilterState, ParameterEventHandler
 from cft_action.subscription import (
     ContentFilterOptions,
@@ -18,7 +18,7 @@ from cft_action.subscription import (
 )
 
 __all__ = [
-    'ActionClient', 'ContentFilterError', 'FeedbackFilterState', 'ParameterEventFilterState',
-    'ParameterEventHandler', 'ContentFilterOptions', 'create_filtered_subscription',
+    'ActionClient', 'CftActionError', 'ContentFilterError', 'FeedbackFilterState',
+    'InvalidArgumentError', 'ParameterEventFilterState', 'ParameterEventHandler', 'ContentFilterOptions', 'create_filtered_subscription',
     'get_content_filter', 'is_content_filter_supported', 'is_filtered', 'set_content_filter',
 ]

@@ -18,6 +18,8 @@ from typing import Any, Callable, Optional, Sequence
 # to those very copies instead of guessing paths.
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy  # noqa: F401
 
+from cft_action.errors import BindingUnavailable, ContentFilterError
+
 RCL_RET_OK = 0
 _RET_NAMES = {
     1: 'RCL_RET_ERROR',
@@ -29,26 +31,6 @@ _RET_NAMES = {
     400: 'RCL_RET_SUBSCRIPTION_INVALID',
 }
 RCL_RET_UNSUPPORTED = 3
-
-
-class ContentFilterError(RuntimeError):
-    """A content-filter operation failed; the message carries rcl's own error string.
-
-    :ivar function: the rcl function that failed, or None for a check done in Python.
-    :ivar ret: the ``rcl_ret_t`` it returned, or None.
-    :ivar rcl_error: rcl's error string, as ``rcutils_get_error_string()`` gave it.
-    """
-
-    def __init__(self, message: str, *, function: Optional[str] = None,
-                 ret: Optional[int] = None, rcl_error: str = '') -> None:
-        super().__init__(message)
-        self.function = function
-        self.ret = ret
-        self.rcl_error = rcl_error
-
-
-class BindingUnavailable(RuntimeError):
-    """The rcl libraries or one of the symbols this module needs could not be loaded."""
 
 
 # --- struct layouts (rcutils / rmw / rcl, Jazzy) -------------------------------------------------

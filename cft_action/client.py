@@ -21,6 +21,7 @@ from rclpy.task import Future
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import _rcl
+from cft_action.errors import InvalidArgumentError
 from cft_action.filters import MATCH_ALL
 from cft_action.goal_filter import ExpressionTooLong, GoalFilterPlan, MODES, random_uuid4
 from cft_action.subscription import is_content_filter_supported
@@ -76,7 +77,7 @@ def _resolve_mode(feedback_filter: Optional[str]) -> str:
     mode = from_env or feedback_filter or 'client'
     if mode not in MODES:
         source = f'environment variable {FEEDBACK_FILTER_ENV}' if from_env else 'feedback_filter'
-        raise ValueError(f'{source}={mode!r}: expected one of {", ".join(MODES)}')
+        raise InvalidArgumentError(f'{source}={mode!r}: expected one of {", ".join(MODES)}')
     return mode
 
 

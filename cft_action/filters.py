@@ -13,6 +13,8 @@ import math
 import re
 from typing import Iterable, Union
 
+from cft_action.errors import InvalidArgumentError
+
 GOAL_UUID_FIELD = 'goal_id.uuid'
 
 #: An expression that no sample matches. rmw_fastrtps recreates the DataReader when a filter is set
@@ -50,19 +52,19 @@ def dds_literal(value: Literal) -> str:
         return str(value)
     if isinstance(value, float):
         if not math.isfinite(value):
-            raise ValueError(f'{value!r} has no DDS literal form')
+            raise InvalidArgumentError(f'{value!r} has no DDS literal form')
         return repr(value)
     if not isinstance(value, str):
         raise TypeError(f'cannot make a DDS literal of {type(value).__name__} {value!r}')
     if len(value) >= 2 and value[0] in _QUOTES and value[-1] == "'":
         inner = value[1:-1]
         if any(q in inner for q in _QUOTES):
-            raise ValueError(f'{value!r}: a quote inside a quoted DDS string cannot be escaped')
+            raise InvalidArgumentError(f'{value!r}: a quote inside a quoted DDS string cannot be escaped')
         return value
     if value in _BOOLEANS or _NUMBER.fullmatch(value):
         return value
     if any(q in value for q in _QUOTES):
-        raise ValueError(f'{value!r} contains a quote character; the DDS-SQL grammar of Fast DDS '
+        raise InvalidArgumentError(f'{value!r} contains a quote character; the DDS-SQL grammar of Fast DDS '
                          'has no escape for it, so it cannot be a string literal')
     return f"'{value}'"
 
@@ -80,7 +82,7 @@ def dds_literals(values: Iterable[Literal]) -> list[str]:
 def uuid_prefix_term(prefix: bytes, field: str = GOAL_UUID_FIELD) -> str:
     """Match a UUID field whose first bytes equal ``prefix``: one indexed equality per byte."""
     if not 1 <= len(prefix) <= 16:
-        raise ValueError(f'a UUID prefix has 1 to 16 bytes, not {len(prefix)}')
+        raise InvalidArgumentError(f'a UUID prefix has 1 to 16 bytes, not {len(prefix)}')
     return ' AND '.join(f'{field}[{i}] = {b}' for i, b in enumerate(prefix))
 
 

@@ -25,6 +25,7 @@ import os
 import uuid as uuid_module
 from typing import Callable, Optional
 
+from cft_action.errors import CftActionError, InvalidArgumentError
 from cft_action.filters import any_of, uuid_prefix_term
 
 MODES = ('client', 'goals', 'off')
@@ -35,7 +36,7 @@ MAX_RESERVE = 64
 MAX_EXPRESSION_BYTES = 60_000
 
 
-class ExpressionTooLong(ValueError):
+class ExpressionTooLong(CftActionError, ValueError):
     """The filter expression would not fit into a discovery message."""
 
 
@@ -59,7 +60,7 @@ class GoalFilterPlan:
                  reserve: int = DEFAULT_RESERVE,
                  new_uuid: Callable[[], bytes] = random_uuid4) -> None:
         if mode not in ('client', 'goals'):
-            raise ValueError(f'no filter plan for mode {mode!r}')
+            raise InvalidArgumentError(f'no filter plan for mode {mode!r}')
         self.mode = mode
         self.tag = (tag or os.urandom(TAG_BYTES)) if mode == 'client' else None
         self._reserve_size = reserve if mode == 'goals' else 0

@@ -29,6 +29,8 @@ import re
 from pathlib import Path
 from typing import Mapping, Optional
 
+from cft_action.errors import CftActionError
+
 __all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts', 'environment']
 
 #: Name of the extension module that setup.py builds from ``_guard.c``.
@@ -38,7 +40,7 @@ _MODULE = '_cftguard'
 _ARMED, _ACTIVE, _INACTIVE = 0, 1, 2
 
 
-class GuardUnavailable(RuntimeError):
+class GuardUnavailable(CftActionError, RuntimeError):
     """The guard library was not built, or its path cannot be put into ``LD_PRELOAD``."""
 
 

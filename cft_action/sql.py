@@ -41,6 +41,8 @@ from dataclasses import dataclass
 from decimal import Decimal
 from typing import Any, Callable, Iterable, Optional, Sequence, Union
 
+from cft_action.errors import CftActionError
+
 __all__ = [
     'Filter', 'FilterError', 'FieldPath', 'Kind', 'Schema', 'compile_filter', 'like_to_regex',
     'parse', 'parse_literal',
@@ -81,7 +83,7 @@ _TEXT = frozenset({Kind.CHAR, Kind.STRING})
 Schema = Callable[[FieldPath], Kind]
 
 
-class FilterError(ValueError):
+class FilterError(CftActionError, ValueError):
     """An expression that cannot be applied: its syntax, a field, a parameter or a type.
 
     ``str()`` gives one line that names the expression and the reason; :attr:`detail` adds a caret

@@ -30,7 +30,7 @@ from rclpy.type_support import check_is_valid_msg_type
 from rosidl_parser.definition import AbstractString, Array, BasicType, NamespacedType
 
 from cft_action import _rcl, sql
-from cft_action._rcl import ContentFilterError
+from cft_action.errors import ContentFilterError
 from cft_action.filters import dds_literals, Literal, never_match_on
 
 __all__ = [

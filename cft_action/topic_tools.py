@@ -27,6 +27,7 @@ from typing import Callable, Optional
 import yaml
 
 from cft_action import sql
+from cft_action.errors import CftActionError
 
 __all__ = [
     'EXIT_ERROR', 'EXIT_FILTER', 'FilterUnavailable', 'TopicToolError', 'get_message_class',
@@ -41,8 +42,11 @@ EXIT_ERROR = 1
 DEFAULT_TRUNCATE_LENGTH = 128
 
 
-class TopicToolError(Exception):
-    """A failure that ends a command with a message and :attr:`exit_code`."""
+class TopicToolError(CftActionError):
+    """A failure that ends a command with a message and :attr:`exit_code`.
+
+    No builtin fits every case (an unknown type, a topic that never appears), so it has none.
+    """
 
     exit_code = EXIT_ERROR
 
