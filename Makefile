@@ -1,18 +1,24 @@
-# Set-up is part of every target: `make test` and `make demo` create .venv and install into it.
+# Set-up is part of every target: `make test`, `make lint` and `make demo` create .venv and install
+# into it.
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: test demo bench clean
+.PHONY: test lint demo bench clean
 
 $(STAMP): pyproject.toml setup.py cft_action/_guard.c
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[test,bench]'
+	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[test,bench,lint]'
 	touch $(STAMP)
 
 test: $(STAMP)
 	$(PY) -m pytest
+
+# ruff and mypy take their settings from pyproject.toml.
+lint: $(STAMP)
+	$(PY) -m ruff check cft_action
+	$(PY) -m mypy
 
 demo: $(STAMP)
 	$(PY) demos/load_demo.py
@@ -21,4 +27,4 @@ bench: $(STAMP)
 	$(PY) benchmarks/sweep.py
 
 clean:
-	rm -rf $(VENV) build *.egg-info cft_action/*.so
+	rm -rf $(VENV) build *.egg-info cft_action/*.so .mypy_cache .ruff_cache

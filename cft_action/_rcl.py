@@ -124,7 +124,7 @@ _options_p = ctypes.POINTER(_ContentFilterOptions)
 _rcl_ret_t = ctypes.c_int
 
 # name: (library, restype, argtypes, errcheck)
-_SYMBOLS = {
+_SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'rcl_get_zero_initialized_subscription_content_filter_options':
         (_rcl, _ContentFilterOptions, [], None),
     'rcl_subscription_content_filter_options_init':
@@ -152,10 +152,10 @@ class _Bound:
             setattr(self, name, _map_symbol(library, name, restype, argtypes, errcheck))
 
 
-_lib = _Bound()
+_lib: Any = _Bound()  # its attributes are the functions of _SYMBOLS, set at run time
 
 
-# --- content filters on an rcl_subscription_t* ------------------------------------------------------
+# --- content filters on an rcl_subscription_t* ----------------------------------------------------
 
 def _check_subscription(subscription_ptr: int) -> None:
     if not subscription_ptr or not _lib.rcl_subscription_is_valid(subscription_ptr):
@@ -208,7 +208,7 @@ def subscription_topic_name(subscription_ptr: int) -> Optional[str]:
     return name.decode()
 
 
-# --- private layout: an action client's feedback subscription --------------------------------------
+# --- private layout: an action client's feedback subscription -------------------------------------
 
 # Jazzy's rcl_action_client_impl_t starts with three rcl_client_t (one pointer each) followed by the
 # feedback rcl_subscription_t. This has held since Foxy, but it is private: every use is verified.

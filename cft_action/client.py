@@ -115,7 +115,7 @@ class ActionClient(_RclpyActionClient):
         self._cft_logger = node.get_logger().get_child('cft_action')
         self._filter_lock = threading.RLock()
         self._plan: Optional[GoalFilterPlan] = None
-        self._feedback_ptr: Optional[int] = None
+        self._feedback_ptr = 0  # the feedback rcl_subscription_t*, once the filter is installed
         self._state = FeedbackFilterState(mode, False, '', '', 0, 0, 0, 0)
         self._installed = False
         self._finished: dict[bytes, float] = {}  # goal UUID -> when it finished
@@ -129,7 +129,7 @@ class ActionClient(_RclpyActionClient):
             RELEASE_CHECK_PERIOD, self._release_finished_goals, callback_group=self.callback_group)
         self._release_timer.cancel()
 
-    # --- installation ------------------------------------------------------------------------------
+    # --- installation -----------------------------------------------------------------------------
 
     def _install_before_first_wait(self, node: Node, action_type: Any, action_name: str,
                                    kwargs: dict) -> None:
@@ -148,14 +148,14 @@ class ActionClient(_RclpyActionClient):
                 self._install_filter(node.resolve_topic_name(action_name))
             add_waitable(waitable)
 
-        node.add_waitable = install_then_add
+        node.add_waitable = install_then_add  # type: ignore[method-assign]
         try:
             super().__init__(node, action_type, action_name, **kwargs)
         finally:
             if shadowed is None:
                 del node.add_waitable
             else:
-                node.add_waitable = shadowed
+                node.add_waitable = shadowed  # type: ignore[method-assign]
         if not self._installed:
             self._fall_back('rclpy did not add the client through Node.add_waitable')
 
@@ -216,7 +216,7 @@ class ActionClient(_RclpyActionClient):
             reason += f'; and letting all feedback through failed too, feedback may be lost: {e}'
         self._fall_back(reason)
 
-    # --- public API --------------------------------------------------------------------------------
+    # --- public API -------------------------------------------------------------------------------
 
     @property
     def feedback_filter_state(self) -> FeedbackFilterState:
@@ -282,12 +282,12 @@ class ActionClient(_RclpyActionClient):
         self._node.destroy_timer(self._release_timer)
         super().destroy()
 
-    # --- goal bookkeeping --------------------------------------------------------------------------
+    # --- goal bookkeeping -------------------------------------------------------------------------
 
     def _watch(self, goal_uuid: bytes) -> None:
         self._last_activity = time.monotonic()
         self._finished.pop(goal_uuid, None)
-        if not self._plan.watch(goal_uuid):
+        if self._plan is None or not self._plan.watch(goal_uuid):
             return
         if self._plan.mode == 'client' and not self._logged_explicit_uuid:
             self._logged_explicit_uuid = True

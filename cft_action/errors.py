@@ -45,4 +45,4 @@ class ContentFilterError(CftActionError, RuntimeError):
 
 
 class BindingUnavailable(CftActionError, RuntimeError):
-    """The rcl libraries, or one of the symbols that :mod:`cft_action._rcl` needs, cannot be loaded."""
+    """The rcl libraries, or a symbol that :mod:`cft_action._rcl` needs, cannot be loaded."""

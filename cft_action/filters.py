@@ -59,13 +59,15 @@ def dds_literal(value: Literal) -> str:
     if len(value) >= 2 and value[0] in _QUOTES and value[-1] == "'":
         inner = value[1:-1]
         if any(q in inner for q in _QUOTES):
-            raise InvalidArgumentError(f'{value!r}: a quote inside a quoted DDS string cannot be escaped')
+            raise InvalidArgumentError(
+                f'{value!r}: a quote inside a quoted DDS string cannot be escaped')
         return value
     if value in _BOOLEANS or _NUMBER.fullmatch(value):
         return value
     if any(q in value for q in _QUOTES):
-        raise InvalidArgumentError(f'{value!r} contains a quote character; the DDS-SQL grammar of Fast DDS '
-                         'has no escape for it, so it cannot be a string literal')
+        raise InvalidArgumentError(f'{value!r} contains a quote character; the DDS-SQL grammar of '
+                                   'Fast DDS has no escape for it, so it cannot be a string '
+                                   'literal')
     return f"'{value}'"
 
 

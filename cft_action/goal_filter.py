@@ -2,7 +2,8 @@
 """What an action client's feedback filter must match, and when it must change: no ROS import.
 
 Every change of the filter is an event at the server's writer, and such events can crash a Fast
-DDS server (docs/INTERNALS.md section 10), so this planner is built to change the filter as rarely as it can:
+DDS server (docs/INTERNALS.md section 10), so this planner is built to change the filter as rarely
+as it can:
 
 - ``client`` mode matches a random tag that starts every UUID this client generates. The filter is
   fixed for the life of the client; only caller-supplied UUIDs without the tag need an exact term.
@@ -74,6 +75,8 @@ class GoalFilterPlan:
 
     def tagged_uuid(self) -> bytes:
         """A fresh UUID that starts with the tag (``client`` mode): it needs no term."""
+        if self.tag is None:
+            raise InvalidArgumentError("a 'goals' plan has no tag to start a UUID with")
         raw = bytearray(self._new_uuid())
         raw[:TAG_BYTES] = self.tag
         return bytes(raw)
@@ -112,10 +115,10 @@ class GoalFilterPlan:
 
     def needs_term(self, goal_uuid: bytes) -> bool:
         """Whether the filter needs a term for this goal to receive its feedback."""
-        return self.mode == 'goals' or not goal_uuid.startswith(self.tag)
+        return self.tag is None or not goal_uuid.startswith(self.tag)  # no tag: 'goals' mode
 
     def watch(self, goal_uuid: bytes) -> bool:
-        """Register a goal that has a feedback callback; return True if the filter must grow first."""
+        """Register a goal with a feedback callback; return True if the filter must grow first."""
         if not self.needs_term(goal_uuid):
             return False
         if goal_uuid in self._reserved:
@@ -166,7 +169,7 @@ class GoalFilterPlan:
 
     def _commit(self) -> str:
         wanted = self._wanted()
-        terms = [uuid_prefix_term(self.tag)] if self.mode == 'client' else []
+        terms = [uuid_prefix_term(self.tag)] if self.tag is not None else []
         terms += [uuid_prefix_term(prefix) for prefix in sorted(wanted)]
         expression = any_of(terms)
         if len(expression.encode()) > MAX_EXPRESSION_BYTES:

@@ -230,7 +230,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         # rclpy's constructor would create an unfiltered subscription, and giving that a first
         # filter later recreates its DataReader; so its three attributes are set here instead.
         self.node = node
-        self.qos_profile = qos_profile
+        self.qos_profile = qos_profile  # type: ignore[assignment]  # rclpy types it QoSProfile only
         self._callbacks = _RclpyParameterEventHandler.Callbacks()
 
         self._cft_logger = node.get_logger().get_child('cft_action')
@@ -318,11 +318,11 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             mode, reason = 'off', self._state.reason
         else:
             mode, reason, _ = self._wanted()
-        active = self._installed is not None and mode != 'all'
+        shown = self._installed if mode != 'all' else None
         self._state = ParameterEventFilterState(
-            mode=mode, active=active, reason=reason,
-            expression=self._installed.filter_expression if active else '',
-            expression_parameters=tuple(self._installed.expression_parameters) if active else (),
+            mode=mode, active=shown is not None, reason=reason,
+            expression=shown.filter_expression if shown is not None else '',
+            expression_parameters=tuple(shown.expression_parameters) if shown is not None else (),
             updates=self._updates, watched_nodes=tuple(sorted(self._watched)), events_received=0)
 
     def _fall_back(self, reason: str, *, log: bool = True) -> None:

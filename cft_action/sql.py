@@ -204,7 +204,7 @@ def _tokenize(expression: str) -> list[_Token]:
                 raise FilterError(expression, 'unterminated string: a string literal is closed by '
                                   "' and cannot contain ' or a line break", pos)
             raise FilterError(expression, f'unexpected character {expression[pos]!r}', pos)
-        kind = match.lastgroup
+        kind = match.lastgroup or ''  # every alternative of _TOKEN is a named group
         text = match.group()
         if kind == 'word':
             kind = _KEYWORDS.get(text, 'field')
@@ -228,7 +228,8 @@ def _c_integer(expression: str, text: str, pos: int) -> tuple[Kind, int]:
     if body[:2] in ('0x', '0X'):
         value = int(body[2:], 16)
     elif body.startswith('0'):
-        value = int(re.match('[0-7]*', body).group() or '0', 8)  # C reads a leading 0 as octal
+        # C reads a leading 0 as octal, and stops at the first digit that is not octal
+        value = int(re.sub('[^0-7].*', '', body) or '0', 8)
     else:
         value = int(body)
     if negative:
@@ -305,6 +306,10 @@ class _Parser:
         index = self.i + ahead
         return self.tokens[index] if index < len(self.tokens) else None
 
+    def peek_type(self, ahead: int = 0) -> Optional[str]:
+        token = self.peek(ahead)
+        return token.type if token is not None else None
+
     def take(self) -> _Token:
         token = self.peek()
         if token is None:
@@ -316,8 +321,8 @@ class _Parser:
         if not self.tokens:
             raise FilterError(self.expression, 'the expression is empty')
         tree = self.condition_list()
-        if self.peek() is not None:
-            token = self.peek()
+        token = self.peek()
+        if token is not None:
             if token.type == 'paren':
                 raise self.error("unbalanced ')'")
             raise self.error(f'expected AND or OR, not {token.text!r}')
@@ -328,7 +333,7 @@ class _Parser:
         return self.continue_list(tree)
 
     def continue_list(self, tree):
-        while self.peek() is not None and self.peek().type in ('AND', 'OR'):
+        while self.peek_type() in ('AND', 'OR'):
             op = self.take().type
             right = self.condition()
             tree = And(tree, right) if op == 'AND' else Or(tree, right)
@@ -373,14 +378,14 @@ class _Parser:
         left = self.operand()
         token = self.peek()
         if isinstance(left, Field) and token is not None and (
-                token.type == 'BETWEEN' or (token.type == 'NOT' and self.peek(1) is not None
-                                            and self.peek(1).type == 'BETWEEN')):
+                token.type == 'BETWEEN'
+                or (token.type == 'NOT' and self.peek_type(1) == 'BETWEEN')):
             negated = token.type == 'NOT'
             self.take()
             if negated:
                 self.take()
             low = self.operand()
-            if self.peek() is None or self.peek().type != 'AND':
+            if self.peek_type() != 'AND':
                 raise self.error('expected AND in BETWEEN ... AND ...')
             self.take()
             high = self.operand()
@@ -719,11 +724,11 @@ class Filter:
     def _state(self, node, values) -> Optional[bool]:
         """Three-valued evaluation: None while a field that decides it is not read yet."""
         if isinstance(node, _Predicate):
-            left = self._operand(node.left, values)
-            right = self._operand(node.right, values)
-            if left is None or right is None:
+            left_value = self._operand(node.left, values)
+            right_value = self._operand(node.right, values)
+            if left_value is None or right_value is None:
                 return None
-            return self._decide(node, left, right)
+            return self._decide(node, left_value, right_value)
         if isinstance(node, Not):
             state = self._state(node.operand, values)
             return None if state is None else not state
@@ -745,6 +750,7 @@ class Filter:
     @staticmethod
     def _operand(operand: _Operand, values) -> Optional[tuple[Kind, Any]]:
         if operand.field is None:
+            assert operand.kind is not None  # a constant's kind is known when it is parsed
             return operand.kind, operand.value
         return values.get(operand.field.text)
 

@@ -61,8 +61,9 @@ class ContentFilterOptions(NamedTuple):
 def is_content_filter_supported(node: Node) -> bool:
     """Return whether the rmw implementation that ``node`` runs on supports content filtering.
 
-    This is a cheap probe, by rmw identifier; it creates nothing. A filter that the rmw then fails to
-    apply is still reported, by :func:`set_content_filter` and :func:`create_filtered_subscription`.
+    This is a cheap probe, by rmw identifier; it creates nothing. A filter that the rmw then fails
+    to apply is still reported, by :func:`set_content_filter` and
+    :func:`create_filtered_subscription`.
     """
     del node  # the rmw is process-wide on Jazzy; the node is taken for a per-node future
     return rclpy.get_rmw_implementation_identifier() in CFT_RMW_IMPLEMENTATIONS
@@ -217,7 +218,8 @@ def create_filtered_subscription(
     callback_group.add_entity(subscription)
     node._subscriptions.append(subscription)
     node._wake_executor()
-    for event_handler in subscription.event_handlers:
+    # rclpy 7.1 annotates event_handlers as one EventHandler; it is a list of them.
+    for event_handler in subscription.event_handlers:  # type: ignore[attr-defined]
         node.add_waitable(event_handler)
     return subscription
 

@@ -1,4 +1,4 @@
-"""The exception hierarchy: one base, the fitting builtin mixed in, today's names where they were."""
+"""The exception hierarchy: one base, the builtin that fits mixed in, today's names kept."""
 
 import importlib
 import pkgutil
@@ -66,6 +66,7 @@ def test_the_public_content_filter_error_lives_in_the_public_module():
     lambda: dds_literal("it's"),
     lambda: uuid_prefix_term(b''),
     lambda: GoalFilterPlan('off'),
+    lambda: GoalFilterPlan('goals').tagged_uuid(),
 ])
 def test_bad_input_is_an_invalid_argument_error_and_a_value_error(call):
     with pytest.raises(InvalidArgumentError):

@@ -34,7 +34,8 @@ def test_pure_modules_import_without_rclpy():
 
 def test_the_package_imports_no_ros_until_a_ros_name_is_used():
     result = run_python('import cft_action\n'
-                        'assert issubclass(cft_action.ContentFilterError, cft_action.CftActionError)\n'
+                        'assert issubclass(cft_action.ContentFilterError,\n'
+                        '                  cft_action.CftActionError)\n'
                         'assert cft_action.sql.compile_filter("data > 1")\n'
                         'from cft_action import CftActionError, InvalidArgumentError')
     assert result.returncode == 0, result.stderr

@@ -46,8 +46,8 @@ def start_nodes():
 
     The nodes run under the guard: every filter change is an event at each of their
     /parameter_events writers, and the tests publish right after changes (to sync), which is when
-    an unguarded Fast DDS 2.14 writer can crash (docs/INTERNALS.md section 10; tests/test_guard.py covers
-    that hazard itself).
+    an unguarded Fast DDS 2.14 writer can crash (docs/INTERNALS.md section 10; tests/test_guard.py
+    covers that hazard itself).
     """
     children = []
 
