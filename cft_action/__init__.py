@@ -20,14 +20,9 @@ from cft_action.errors import CftActionError, ContentFilterError, InvalidArgumen
 if TYPE_CHECKING:
     from cft_action.client import ActionClient, FeedbackFilterState
     from cft_action.parameter_events import ParameterEventFilterState, ParameterEventHandler
-    from cft_action.subscription import (
-        ContentFilterOptions,
-        create_filtered_subscription,
-        get_content_filter,
-        is_content_filter_supported,
-        is_filtered,
-        set_content_filter,
-    )
+    from cft_action.subscription import (ContentFilterOptions, create_filtered_subscription,
+                                         get_content_filter, is_content_filter_supported,
+                                         is_filtered, set_content_filter)
 
 # name: the module that defines it, imported when the name is first used
 _LAZY = {
