@@ -17,6 +17,7 @@ import cft_action.client
 from cft_action import ActionClient, guard
 from cft_action.client import FINISHED_GOAL_GRACE
 from cft_action.filters import NEVER_MATCH
+from tests.helpers._polling import wait_until
 from tests.support import RosSession, action_server, helper_process, unique_name
 
 PERIOD = 0.01  # 100 Hz feedback per goal
@@ -123,15 +124,18 @@ def make_client(ros, action, **kwargs):
     return client
 
 
-def round_trip(ros, client, tries=10):
+def round_trip(ros, client, tries=10, wait=None):
     """Complete one order-0 goal (no feedback), resending while the service endpoints match.
 
     wait_for_server sees the server in the graph; a goal response written before the server's
     response writer matched this client's reader is lost for good (volatile), as with rclpy.
+
+    :param wait: how to wait for the response, ``ros.spin_until`` unless an executor already spins
+        in another thread.
     """
     for _ in range(tries):
         future = client.send_goal_async(Fibonacci.Goal(order=0))
-        if ros.spin_until(future.done, 2):
+        if (wait or ros.spin_until)(future.done, 2):
             return future.result().accepted
     return False
 
@@ -277,6 +281,8 @@ def test_multithreaded_executor_with_goals_sent_from_another_thread(server):
         client = ActionClient(ros.node, Fibonacci, action, feedback_filter='goals',
                               feedback_sub_qos_profile=QoSProfile(depth=1000))
         assert client.wait_for_server(timeout_sec=20)
+        # send_goal waits for ever on a goal response that was lost: prove the service first.
+        assert round_trip(ros, client, wait=wait_until), 'the server never answered a goal'
         lock = threading.Lock()
         received: dict[int, list[int]] = {}
 

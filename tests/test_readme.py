@@ -18,10 +18,10 @@ def readme_example(name: str) -> str:
     return match.group(1)
 
 
-def test_readme_starts_with_the_two_set_up_commands():
+def test_readme_starts_with_the_set_up_commands():
     first_block = re.search(r'```bash\n(.*?)```', README.read_text(), re.DOTALL).group(1)
     assert [line.split('#')[0].strip() for line in first_block.splitlines()] == \
-        ['make demo', 'make test']
+        ['make demo', 'make test', 'make lint']
 
 
 def test_tutorial_client_runs_unchanged_but_for_the_import(tmp_path):
