@@ -107,7 +107,7 @@ def test_many_concurrent_goals_keep_the_filter_active(ros, mode, goals):
     finally:
         child.stop()
     assert report['active'], report['reason']
-    assert report['complete_goals'] == goals
+    assert report['complete_goals'] == goals, json.dumps(report)
     assert report['taken'] == report['own_received'] == goals * 6
     if mode == 'client':
         assert report['updates'] == 0
