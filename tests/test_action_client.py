@@ -278,8 +278,12 @@ def test_multithreaded_executor_with_goals_sent_from_another_thread(server):
     spinner.start()
     try:
         time.sleep(0.2)  # the executor is waiting when the client is created
+        # 12 goal responses may arrive before this loaded executor takes one: rclpy's default depth
+        # of 10 would drop the oldest, and their send_goal would wait for ever.
+        deep = QoSProfile(depth=1000)
         client = ActionClient(ros.node, Fibonacci, action, feedback_filter='goals',
-                              feedback_sub_qos_profile=QoSProfile(depth=1000))
+                              goal_service_qos_profile=deep, result_service_qos_profile=deep,
+                              feedback_sub_qos_profile=deep)
         assert client.wait_for_server(timeout_sec=20)
         # send_goal waits for ever on a goal response that was lost: prove the service first.
         assert round_trip(ros, client, wait=wait_until), 'the server never answered a goal'
