@@ -73,6 +73,9 @@ class LoadSpec:
     :ivar drain_timeout: seconds a phase may take after its goals finished, for slow clients.
     :ivar goals_timeout: seconds the goals of a phase may take; None: 120 + 30 x their nominal
         duration (a saturated machine runs them several times slower).
+    :ivar settle_s: seconds of quiet after the last goal before a phase is accounted (see
+        :data:`SETTLE_S`).
+    :ivar server_env: extra environment of the server process (e.g. the guard's settings).
     """
 
     clients: int = 8
@@ -83,6 +86,8 @@ class LoadSpec:
     network: str = 'auto'
     drain_timeout: float = 300.0
     goals_timeout: Optional[float] = None
+    settle_s: float = SETTLE_S
+    server_env: dict[str, str] = dataclasses.field(default_factory=dict)
 
     @property
     def total_goals(self) -> int:
@@ -153,7 +158,7 @@ class LoadRun:
                 '--result-timeout', str(RESULT_TIMEOUT_S)]
         if self.topology:
             argv = self.topology.command(self.topology.server, argv)
-        self.server = Proc('server', argv, guard.environment(self.env))
+        self.server = Proc('server', argv, guard.environment({**self.env, **spec.server_env}))
         try:
             self.server.expect('READY', 60)
         except Exception:
@@ -229,7 +234,7 @@ class LoadRun:
             t = time.monotonic()
             if now != last:
                 last, stable_since = now, t
-            if t - stable_since >= 1.5 and t - since >= SETTLE_S:
+            if t - stable_since >= 1.5 and t - since >= self.spec.settle_s:
                 return
             if t > deadline:
                 self.progress(f'    drain timeout after {self.spec.drain_timeout:.0f} s; '
@@ -260,7 +265,7 @@ class LoadRun:
             go = time.monotonic()
             for client in clients:
                 client.send('go')
-            self._wait_for_goals(before)
+            done = self._wait_for_goals(before)
             goals_s = time.monotonic() - go
             self.progress(f'[{CONFIG_LABELS[config]}] goals finished in {goals_s:.1f} s; '
                           'waiting for the clients to take the rest')
@@ -287,6 +292,11 @@ class LoadRun:
             'published': after['published'] - before['published'],
             'accepted': after['accepted'] - before['accepted'],
             'server_cpu_s': after['cpu_s'] - before['cpu_s'],
+            'server_cpu_goals_s': done['cpu_s'] - before['cpu_s'],
+            'published_at_goals': done['published'] - before['published'],
+            'timed_out': done.get('timed_out', False),
+            'guard_filter': {k: v - before.get('guard_filter', {}).get(k, 0)
+                             for k, v in after.get('guard_filter', {}).items()},
             'late_ticks': after['late_ticks'] - before['late_ticks'],
             'intervals': after['intervals'] - before['intervals'],
             'interval_s': after['interval_s'] - before['interval_s'],
