@@ -90,7 +90,12 @@ def run_point(spec: _harness.LoadSpec, configs: Sequence[str], timeout: float,
         try:
             while pending:
                 config = pending.pop(0)
-                phase = run.run_phase(config)
+                try:
+                    phase = run.run_phase(config)
+                except (TimeoutError, RuntimeError) as failure:  # a client or the server failed
+                    progress(f'    {config} failed: {str(failure).splitlines()[0]}')
+                    figures.append({'config': config, 'error': str(failure)[:2000]})
+                    break
                 figures.append(phase_figures(phase))
                 if phase['timed_out']:
                     progress(f'    cut after {timeout:.0f} s: {phase["published_at_goals"]} '
@@ -100,6 +105,8 @@ def run_point(spec: _harness.LoadSpec, configs: Sequence[str], timeout: float,
             run.close()
     plain = next((f for f in figures if f['config'] == 'rclpy'), None)
     for f in figures:
+        if 'error' in f:
+            continue
         f['ratio_to_plain'] = {
             'rate': ratio(f['rate_msgs_per_s'], plain and plain['rate_msgs_per_s']),
             'cpu_per_msg': ratio(f['cpu_ms_per_msg'], plain and plain['cpu_ms_per_msg']),
@@ -149,6 +156,10 @@ def format_table(points: list[dict[str, Any]]) -> str:
              'CPU ms/msg', 'CPU x plain', 'uuid verdicts', 'Fast DDS verdicts')]
     for point in points:
         for f in point['figures']:
+            if 'error' in f:
+                rows.append((point['guard'], point['size'], str(point['clients']),
+                             _harness.CONFIG_LABELS[f['config']] + ' (failed)', *['-'] * 8))
+                continue
             r = f['ratio_to_plain']
             gf = f['guard_filter']
             rows.append((point['guard'], point['size'], str(point['clients']),
@@ -183,7 +194,7 @@ def plot(points: list[dict[str, Any]], path: Path) -> None:
                 xs, ys = [], []
                 for p in sorted(mine, key=lambda p: p['clients']):
                     f = next((f for f in p['figures'] if f['config'] == config), None)
-                    if f and f['ratio_to_plain']['rate'] is not None:
+                    if f and f.get('ratio_to_plain', {}).get('rate') is not None:
                         xs.append(p['clients'])
                         ys.append(f['ratio_to_plain']['rate'])
                 ax.plot(xs, ys, marker='o', label=_harness.CONFIG_LABELS[config])
