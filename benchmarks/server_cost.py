@@ -31,6 +31,8 @@ import argparse
 import datetime
 import json
 import platform
+import signal
+import subprocess
 import sys
 import time
 from pathlib import Path
@@ -61,6 +63,29 @@ class CappedRun(_harness.LoadRun):
             time.sleep(0.1)
 
 
+class ProfiledRun(CappedRun):
+    """A capped run that samples the server with ``perf record`` while the goals of a phase run."""
+
+    profile_dir = Path('.')
+
+    def window_started(self, clients: list[Any], server_stats: dict[str, Any]) -> None:
+        self.perf_data = self.profile_dir / f'perf-{len(list(self.profile_dir.glob("perf-*")))}.data'
+        self.perf = subprocess.Popen(['perf', 'record', '-F', '499', '-g', '-p', str(self.server.pid),
+                                      '-o', str(self.perf_data)],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def window_ended(self, clients: list[Any]) -> dict[str, Any]:
+        self.perf.send_signal(signal.SIGINT)
+        self.perf.wait(timeout=60)
+        report = subprocess.run(['perf', 'report', '-i', str(self.perf_data), '--no-children',
+                                 '--sort', 'dso,symbol', '--stdio', '-g', 'none',
+                                 '--percent-limit', '1.5'],
+                                capture_output=True, text=True, timeout=300).stdout
+        rows = [line.strip() for line in report.splitlines()
+                if line.strip() and not line.startswith('#')]
+        return {'profile': rows[:25], 'perf_data': str(self.perf_data)}
+
+
 def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
     """Rate and CPU per message of one phase, from the server's counters at its last goal."""
     summary = phase['summary']
@@ -76,17 +101,21 @@ def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
         'own_per_client': summary['own_per_client'],
         'foreign_per_client': summary['foreign_per_client'],
         'guard_filter': phase.get('guard_filter', {}),
+        **({'profile': phase['profile']} if 'profile' in phase else {}),
     }
 
 
 def run_point(spec: _harness.LoadSpec, configs: Sequence[str], timeout: float,
-              progress: _harness.Progress) -> list[dict[str, Any]]:
+              progress: _harness.Progress, profile_dir: Optional[Path] = None
+              ) -> list[dict[str, Any]]:
     """Run ``configs`` under ``spec``; a fresh server after any phase that was cut."""
     figures: list[dict[str, Any]] = []
     pending = list(configs)
     while pending:
-        run = CappedRun(spec, progress)
+        run = CappedRun(spec, progress) if profile_dir is None else ProfiledRun(spec, progress)
         run.phase_timeout = timeout
+        if profile_dir is not None:
+            run.profile_dir = profile_dir
         try:
             while pending:
                 config = pending.pop(0)
@@ -135,6 +164,9 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--output', type=Path, default=None)
     parser.add_argument('--plot', type=Path, default=None, metavar='PNG',
                         help='also draw the rate ratios into this file')
+    parser.add_argument('--profile', type=Path, default=None, metavar='DIR',
+                        help='sample the server with perf record during each phase\'s goals, '
+                             'keep perf-N.data in DIR, and add the top symbols to the results')
     args = parser.parse_args(argv)
     args.sizes = [s for s in args.sizes.split(',') if s]
     args.clients = [int(n) for n in args.clients.split(',') if n]
@@ -240,13 +272,19 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 spec = _harness.LoadSpec(clients=n, goals=1, order=order, rate_hz=args.rate,
                                          pad=SIZES[size], network='count', settle_s=2.0,
                                          server_env=GUARD_MODES[guard_mode])
-                figures = run_point(spec, args.configs, args.phase_timeout, progress)
+                if args.profile:
+                    args.profile.mkdir(parents=True, exist_ok=True)
+                figures = run_point(spec, args.configs, args.phase_timeout, progress,
+                                    args.profile)
                 result['points'].append({'guard': guard_mode, 'size': size, 'clients': n,
                                          'feedback_bytes': _harness.feedback_size(SIZES[size]),
                                          'figures': figures})
                 output.parent.mkdir(parents=True, exist_ok=True)
                 output.write_text(json.dumps(result, indent=1))
                 print(format_table(result['points'][-1:]), flush=True)
+                for f in figures:
+                    if f.get('profile'):
+                        print(f"perf, {f['config']}:", *f['profile'][:12], sep='\n  ', flush=True)
     result['finished'] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds')
     output.write_text(json.dumps(result, indent=1))
     print('\n' + format_table(result['points']))
