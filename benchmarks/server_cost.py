@@ -164,6 +164,8 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--output', type=Path, default=None)
     parser.add_argument('--plot', type=Path, default=None, metavar='PNG',
                         help='also draw the rate ratios into this file')
+    parser.add_argument('--markdown', type=Path, default=None, metavar='RESULTS',
+                        help='only print the Markdown tables (and draw --plot) of a results file')
     parser.add_argument('--profile', type=Path, default=None, metavar='DIR',
                         help='sample the server with perf record during each phase\'s goals, '
                              'keep perf-N.data in DIR, and add the top symbols to the results')
@@ -201,6 +203,39 @@ def format_table(points: list[dict[str, Any]]) -> str:
                          _fmt(f['cpu_ms_per_msg'], '.3f'), _fmt(r['cpu_per_msg'], '.2f'),
                          str(gf.get('uuid_verdicts', '-')), str(gf.get('fastdds_verdicts', '-'))))
     return _harness._grid(rows)
+
+
+def markdown(points: list[dict[str, Any]]) -> str:
+    """One Markdown table per guard mode: rate and CPU per message as ratios to plain rclpy."""
+    out = []
+    for guard_mode in GUARD_MODES:
+        mine = [p for p in points if p['guard'] == guard_mode]
+        if not mine:
+            continue
+        configs = [f['config'] for f in mine[0]['figures'] if f['config'] != 'rclpy']
+        head = ['feedback', 'N', 'plain: msgs/s, CPU ms/msg']
+        head += [f'{_harness.CONFIG_LABELS[c]}: rate, CPU/msg' for c in configs]
+        out += [f'Guard {guard_mode}: ratios to plain rclpy (rate: higher is better; CPU per '
+                'message: lower is better; "cut": the goals had not finished after the phase '
+                'timeout, the rate is what was published until then)', '',
+                '| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
+        for p in mine:
+            by = {f['config']: f for f in p['figures']}
+            plain = by.get('rclpy', {})
+            row = [f"{p['size']} ({p['feedback_bytes']} B)", str(p['clients']),
+                   f"{_fmt(plain.get('rate_msgs_per_s'), '.0f')}, "
+                   f"{_fmt(plain.get('cpu_ms_per_msg'), '.3f')}"]
+            for c in configs:
+                f = by.get(c)
+                if f is None or 'error' in f:
+                    row.append('failed' if f else '-')
+                    continue
+                r = f['ratio_to_plain']
+                row.append(f"{_fmt(r['rate'], '.2f')}, {_fmt(r['cpu_per_msg'], '.2f')}"
+                           + (' (cut)' if f['timed_out'] else ''))
+            out.append('| ' + ' | '.join(row) + ' |')
+        out.append('')
+    return '\n'.join(out)
 
 
 def _fmt(value: Optional[float], spec: str) -> str:
@@ -247,6 +282,12 @@ def plot(points: list[dict[str, Any]], path: Path) -> None:
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     args = parse_args(argv)
+    if args.markdown:
+        points = json.loads(args.markdown.read_text())['points']
+        print(markdown(points))
+        if args.plot:
+            plot(points, args.plot)
+        return 0
     started = datetime.datetime.now(datetime.timezone.utc)
     output = args.output or (REPO / 'benchmarks' / 'results' /
                              f'server-cost-{started.date().isoformat()}-{platform.node()}.json')
@@ -288,6 +329,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     result['finished'] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds')
     output.write_text(json.dumps(result, indent=1))
     print('\n' + format_table(result['points']))
+    print('\n' + markdown(result['points']))
     print(f'\nresults: {output}')
     if args.plot:
         plot(result['points'], args.plot)
