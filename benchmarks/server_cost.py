@@ -70,7 +70,7 @@ class ProfiledRun(CappedRun):
 
     def window_started(self, clients: list[Any], server_stats: dict[str, Any]) -> None:
         self.perf_data = self.profile_dir / f'perf-{len(list(self.profile_dir.glob("perf-*")))}.data'
-        self.perf = subprocess.Popen(['perf', 'record', '-F', '499', '-g', '-p', str(self.server.pid),
+        self.perf = subprocess.Popen(['perf', 'record', '-F', '1999', '-g', '-p', str(self.server.pid),
                                       '-o', str(self.perf_data)],
                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
@@ -81,9 +81,16 @@ class ProfiledRun(CappedRun):
                                  '--sort', 'dso,symbol', '--stdio', '-g', 'none',
                                  '--percent-limit', '1.5'],
                                 capture_output=True, text=True, timeout=300).stdout
-        rows = [line.strip() for line in report.splitlines()
-                if line.strip() and not line.startswith('#')]
-        return {'profile': rows[:25], 'perf_data': str(self.perf_data)}
+        by_library = subprocess.run(['perf', 'report', '-i', str(self.perf_data), '--no-children',
+                                     '--sort', 'dso', '--stdio', '-g', 'none'],
+                                    capture_output=True, text=True, timeout=300).stdout
+        return {'profile': _perf_rows(report)[:25], 'profile_by_library': _perf_rows(by_library)[:12],
+                'perf_data': str(self.perf_data)}
+
+
+def _perf_rows(report: str) -> list[str]:
+    return [' '.join(line.split()) for line in report.splitlines()
+            if line.strip() and not line.startswith('#')]
 
 
 def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
@@ -101,7 +108,7 @@ def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
         'own_per_client': summary['own_per_client'],
         'foreign_per_client': summary['foreign_per_client'],
         'guard_filter': phase.get('guard_filter', {}),
-        **({'profile': phase['profile']} if 'profile' in phase else {}),
+        **{k: phase[k] for k in ('profile', 'profile_by_library') if k in phase},
     }
 
 
@@ -325,7 +332,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 print(format_table(result['points'][-1:]), flush=True)
                 for f in figures:
                     if f.get('profile'):
-                        print(f"perf, {f['config']}:", *f['profile'][:12], sep='\n  ', flush=True)
+                        print(f"perf, {f['config']}:", *f['profile_by_library'], *f['profile'][:15],
+                              sep='\n  ', flush=True)
     result['finished'] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds')
     output.write_text(json.dumps(result, indent=1))
     print('\n' + format_table(result['points']))
