@@ -91,7 +91,7 @@ def test_feedback_published_in_the_first_line_of_execute_all_arrives(ros, server
     action, child = server
     [report] = run_clients(child, action, mode, 1, goals, 3)
     assert report['active']
-    assert report['complete_goals'] == goals
+    assert report['complete_goals'] == goals, report
     assert report['updates'] == 0
 
 
@@ -107,7 +107,7 @@ def test_many_concurrent_goals_keep_the_filter_active(ros, mode, goals):
     finally:
         child.stop()
     assert report['active'], report['reason']
-    assert report['complete_goals'] == goals
+    assert report['complete_goals'] == goals, report
     assert report['taken'] == report['own_received'] == goals * 6
     if mode == 'client':
         assert report['updates'] == 0
