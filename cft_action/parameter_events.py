@@ -603,7 +603,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
                            if participant not in answered}
                 for participant, services in pending.items():
                     self._probe(participant, services, probes, turns, now)
-                for service, (participant, client, _) in probes.items():
+                for participant, client, _ in probes.values():
                     with client:
                         header, _ = client.take_response(GetParameterTypes.Response)
                     if header is not None:
