@@ -263,6 +263,9 @@ def plot(points: list[dict[str, Any]], path: Path) -> None:
         for si, size in enumerate(sizes):
             ax = axes[gi][si]
             mine = [p for p in points if p['guard'] == guard_mode and p['size'] == size]
+            if not mine:
+                ax.text(0.5, 0.5, 'not measured in this run', ha='center', va='center',
+                        transform=ax.transAxes)
             configs = [f['config'] for f in mine[0]['figures']] if mine else []
             for config in configs:
                 xs, ys = [], []
