@@ -14,7 +14,7 @@ setup(
     ext_modules=[
         Extension(
             'cft_action._cftguard',
-            sources=['cft_action/_guard.c'],
+            sources=['cft_action/_guard.c', 'cft_action/_guard_filter.c'],
             libraries=['dl', 'pthread'],
             # Export only the three interposed Fast DDS members and the cft_guard_* C API.
             # -fexceptions: a C++ exception thrown by Fast DDS through a wrapper must still run

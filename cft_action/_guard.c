@@ -38,7 +38,7 @@
 #include <time.h>
 #include <unistd.h>
 
-#define CFT_EXPORT __attribute__((visibility("default")))
+#include "_guard.h"
 
 // ---- public state codes (mirrored in cft_action/guard.py) ---------------------------------------
 #define CFT_GUARD_ARMED 0        // preloaded; no Fast DDS resolved yet (none loaded, or not used)
@@ -47,12 +47,16 @@
                                  // through (or, if the real function is missing, fail safely)
 
 // ---- the interposed functions ---------------------------------------------------------------------
-enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_COUNT = 3 };
+// The first three are locked; the fourth, DDSFilterExpression::evaluate (a virtual member, whose
+// vtable slot is a relocation against its exported name), is where _guard_filter.c answers
+// uuid-only filters without deserializing the sample. Only Fast DDS 2.14 has it here.
+enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_COUNT = 4 };
 
 // Fast DDS 2.x (libfastrtps), verified on 2.14.5 (ROS 2 Jazzy wheels).
 #define PCNC2 "_ZN8eprosima7fastdds3dds14DataWriterImpl25perform_create_new_changeENS_8fastrtps4rtps12ChangeKind_tEPvRNS4_11WriteParamsERKNS4_16InstanceHandle_tE"
 #define PRFI2 "_ZN8eprosima7fastdds3dds14DataWriterImpl26process_reader_filter_infoERKNS_8fastrtps4rtps6GUID_tERKNS4_15ReaderProxyDataE"
 #define RRF2 "_ZN8eprosima7fastdds3dds14DataWriterImpl20remove_reader_filterERKNS_8fastrtps4rtps6GUID_tE"
+#define EVAL2 "_ZNK8eprosima7fastdds3dds12DDSSQLFilter19DDSFilterExpression8evaluateERKNS_8fastrtps4rtps19SerializedPayload_tERKNS1_14IContentFilter16FilterSampleInfoERKNS5_6GUID_tE"
 
 // Fast DDS 3.x (libfastdds), verified on libfastdds.so.3.2 from the ROS 2 Kilted wheels.
 #define PCNC3 "_ZN8eprosima7fastdds3dds14DataWriterImpl25perform_create_new_changeENS0_4rtps12ChangeKind_tEPKvRNS3_11WriteParamsERKNS3_16InstanceHandle_tE"
@@ -81,26 +85,26 @@ struct family {
 };
 
 static struct family families[] = {
-  {"Fast DDS 2", "libfastrtps.so.2.14", "libfastrtps.so", {PCNC2, PRFI2, RRF2}, {0}, 0,
+  {"Fast DDS 2", "libfastrtps.so.2.14", "libfastrtps.so", {PCNC2, PRFI2, RRF2, EVAL2}, {0}, 0,
    PTHREAD_MUTEX_INITIALIZER, ""},
-  {"Fast DDS 3", "libfastdds.so.3.2", "libfastdds.so", {PCNC3, PRFI3, RRF3}, {0}, 0,
+  {"Fast DDS 3", "libfastdds.so.3.2", "libfastdds.so", {PCNC3, PRFI3, RRF3, NULL}, {0}, 0,
    PTHREAD_MUTEX_INITIALIZER, ""},
 };
 #define N_FAMILIES ((int)(sizeof(families) / sizeof(families[0])))
 
-static unsigned long call_counts[FN_COUNT];
+static unsigned long call_counts[FN_LOCKED];
 static unsigned long degraded_count;     // nested acquisitions that gave up (see lock_writer)
 static int loaded_after_fastdds;         // set by the constructor
 static char late_reason[512];
 
 // ---- logging ---------------------------------------------------------------------------------------
-static int debug_enabled(void) {
+int cft_debug_enabled(void) {
   const char *v = getenv("CFT_GUARD_DEBUG");
   return v != NULL && v[0] != '\0' && strcmp(v, "0") != 0;
 }
 
 // One write(2) per line, so that lines from different threads do not interleave.
-__attribute__((format(printf, 1, 2))) static void say(const char *fmt, ...) {
+void cft_say(const char *fmt, ...) {
   char line[768];
   int n = snprintf(line, sizeof line, "[cft_action guard %d] ", (int)getpid());
   if (n < 0) return;
@@ -148,8 +152,8 @@ static pthread_mutex_t *lock_writer(const void *writer) {
       nanosleep(&ts, NULL);
     }
     if (!got) {
-      if (__atomic_fetch_add(&degraded_count, 1, __ATOMIC_RELAXED) == 0 && debug_enabled())
-        say("a nested write went on without its lock after 50 ms (deadlock avoidance)");
+      if (__atomic_fetch_add(&degraded_count, 1, __ATOMIC_RELAXED) == 0 && cft_debug_enabled())
+        cft_say("a nested write went on without its lock after 50 ms (deadlock avoidance)");
       return NULL;
     }
     held_depth++;
@@ -215,15 +219,16 @@ static int family_of_path(const char *path) {
 
 static void *our_definition(int fam, int fn);
 
-// Looks up all of the family's names in `handle`. Returns how many were found; a result equal to
-// our own definition (which could only come from the global scope) is rejected.
+// Looks up all of the family's names in `handle`. Returns how many of the locked members were
+// found; a result equal to our own definition (which could only come from the global scope) is
+// rejected.
 static int lookup_all(struct family *f, int fam, void *handle, void *out[FN_COUNT]) {
   int found = 0;
   for (int i = 0; i < FN_COUNT; i++) {
-    void *p = dlsym(handle, f->names[i]);
+    void *p = f->names[i] != NULL ? dlsym(handle, f->names[i]) : NULL;
     if (p == our_definition(fam, i)) p = NULL;
     out[i] = p;
-    found += p != NULL;
+    if (i < FN_LOCKED) found += p != NULL;
   }
   return found;
 }
@@ -250,16 +255,16 @@ static void resolve_locked(int fam, int from_call) {
   if (handle != NULL) {
     int found = lookup_all(f, fam, handle, real);
     // The handle is kept on purpose: the cached pointers must not outlive the library.
-    if (found == FN_COUNT && !loaded_after_fastdds) {
+    if (found == FN_LOCKED && !loaded_after_fastdds) {
       state = CFT_GUARD_ACTIVE;
       snprintf(f->reason, sizeof f->reason, "active: %s (%s)", f->known_soname,
                object_of(real[FN_PCNC], where, sizeof where));
-    } else if (found == FN_COUNT) {
+    } else if (found == FN_LOCKED) {
       snprintf(f->reason, sizeof f->reason, "inactive: %.480s", late_reason);
     } else {
       snprintf(f->reason, sizeof f->reason,
                "inactive: %s is loaded but lacks %d of the %d DataWriterImpl members this guard "
-               "wraps; not locking", f->known_soname, FN_COUNT - found, FN_COUNT);
+               "wraps; not locking", f->known_soname, FN_LOCKED - found, FN_LOCKED);
     }
   } else {
     // Not the known version. Find the real definitions anyway, to call straight through.
@@ -279,7 +284,7 @@ static void resolve_locked(int fam, int from_call) {
       dlclose(h);
     }
     for (int i = 0; i < FN_COUNT; i++) {
-      if (real[i] != NULL) continue;
+      if (real[i] != NULL || f->names[i] == NULL) continue;
       void *p = dlsym(RTLD_NEXT, f->names[i]);
       real[i] = p == our_definition(fam, i) ? NULL : p;
     }
@@ -302,11 +307,12 @@ static void resolve_locked(int fam, int from_call) {
   }
 
   memcpy(f->real, real, sizeof real);
+  if (state == CFT_GUARD_ACTIVE && real[FN_EVAL] != NULL) cft_filter_enable((cft_evaluate_fn)real[FN_EVAL]);
   __atomic_store_n(&f->state, state, __ATOMIC_RELEASE);
   if (state != CFT_GUARD_ACTIVE)
-    say("%s", f->reason);  // the one line the user needs; printed once per family
-  else if (debug_enabled())
-    say("%s", f->reason);
+    cft_say("%s", f->reason);  // the one line the user needs; printed once per family
+  else if (cft_debug_enabled())
+    cft_say("%s", f->reason);
 }
 
 static void resolve(int fam, int from_call) {
@@ -326,11 +332,19 @@ static inline struct family *ready(int fam) {
 static void missing(struct family *f, int fn) {
   static int told;
   if (!__atomic_exchange_n(&told, 1, __ATOMIC_RELAXED))
-    say("no real definition of %s; %s", f->names[fn], f->reason);
+    cft_say("no real definition of %s; %s", f->names[fn], f->reason);
 }
 
 // ---- the interposed definitions ---------------------------------------------------------------------
-#define DEFINE_WRAPPERS(SUFFIX, FAM, PCNC, PRFI, RRF)                                          \
+// Restores the thread's filtering writer when the enclosing block is left, however it is left.
+static void restore_filtering_writer(const void **saved) { cft_filtering_writer = *saved; }
+#define FILTERING_WRITER_IN_SCOPE(writer)                                                        \
+  const void *saved_writer_ __attribute__((cleanup(restore_filtering_writer))) =                \
+      cft_filtering_writer;                                                                     \
+  cft_filtering_writer = (writer)
+
+// FILTERS: 1 where the uuid verdicts of _guard_filter.c know the family's layouts (Fast DDS 2.14).
+#define DEFINE_WRAPPERS(SUFFIX, FAM, FILTERS, PCNC, PRFI, RRF)                                  \
   CFT_EXPORT uint32_t cft_pcnc##SUFFIX(void *self, int kind, const void *data, void *params,    \
                                        const void *handle) __asm__(PCNC);                       \
   CFT_EXPORT void cft_prfi##SUFFIX(void *self, const void *guid, const void *info) __asm__(PRFI); \
@@ -344,6 +358,7 @@ static void missing(struct family *f, int fn) {
     if (real == NULL) { missing(f, FN_PCNC); return RETCODE_ERROR; }                            \
     if (f->state != CFT_GUARD_ACTIVE) return real(self, kind, data, params, handle);            \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
+    FILTERING_WRITER_IN_SCOPE(FILTERS && scoped_lock_ != NULL ? self : NULL);                   \
     return real(self, kind, data, params, handle);                                              \
   }                                                                                             \
   void cft_prfi##SUFFIX(void *self, const void *guid, const void *info) {                       \
@@ -354,6 +369,8 @@ static void missing(struct family *f, int fn) {
     if (f->state != CFT_GUARD_ACTIVE) { real(self, guid, info); return; }                       \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
     real(self, guid, info);                                                                     \
+    if (FILTERS && scoped_lock_ != NULL) cft_filter_reader_changed(self, guid, info);           \
+    else if (FILTERS) cft_filter_reader_unknown(self, guid);                                    \
   }                                                                                             \
   void cft_rrf##SUFFIX(void *self, const void *guid) {                                          \
     struct family *f = ready(FAM);                                                              \
@@ -363,15 +380,35 @@ static void missing(struct family *f, int fn) {
     if (f->state != CFT_GUARD_ACTIVE) { real(self, guid); return; }                             \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
     real(self, guid);                                                                           \
+    if (FILTERS) cft_filter_reader_removed(self, guid);                                         \
   }
 
-DEFINE_WRAPPERS(2, 0, PCNC2, PRFI2, RRF2)
-DEFINE_WRAPPERS(3, 1, PCNC3, PRFI3, RRF3)
+DEFINE_WRAPPERS(2, 0, 1, PCNC2, PRFI2, RRF2)
+DEFINE_WRAPPERS(3, 1, 0, PCNC3, PRFI3, RRF3)
+
+// DDSFilterExpression::evaluate of Fast DDS 2.x: a uuid verdict when _guard_filter.c has one for
+// this writer and reader, else the real evaluation.
+CFT_EXPORT bool cft_evaluate2(const void *self, const void *payload, const void *sample_info,
+                              const void *reader_guid) __asm__(EVAL2);
+bool cft_evaluate2(const void *self, const void *payload, const void *sample_info,
+                   const void *reader_guid) {
+  struct family *f = ready(0);
+  cft_evaluate_fn real = (cft_evaluate_fn)f->real[FN_EVAL];
+  if (real == NULL) {
+    // Only Fast DDS calls this, through a vtable it filled itself, so it is loaded; a missing
+    // real definition means it is not one this guard can name. Deliver, as a filter that could
+    // not be evaluated: rclpy's own UUID check still guards every feedback callback.
+    missing(f, FN_EVAL);
+    return true;
+  }
+  if (f->state == CFT_GUARD_ACTIVE) return cft_filter_evaluate(self, payload, sample_info, reader_guid);
+  return real(self, payload, sample_info, reader_guid);
+}
 
 static void *our_definition(int fam, int fn) {
   static void *const ours[][FN_COUNT] = {
-    {(void *)cft_pcnc2, (void *)cft_prfi2, (void *)cft_rrf2},
-    {(void *)cft_pcnc3, (void *)cft_prfi3, (void *)cft_rrf3},
+    {(void *)cft_pcnc2, (void *)cft_prfi2, (void *)cft_rrf2, (void *)cft_evaluate2},
+    {(void *)cft_pcnc3, (void *)cft_prfi3, (void *)cft_rrf3, NULL},
   };
   return ours[fam][fn];
 }
@@ -411,9 +448,9 @@ __attribute__((constructor)) static void cft_guard_loaded(void) {
     snprintf(late_reason, sizeof late_reason,
              "the guard was loaded after Fast DDS (%.400s); preload it with LD_PRELOAD instead",
              list.paths[0]);
-    if (debug_enabled()) say("%s", late_reason);
-  } else if (debug_enabled()) {
-    say("loaded; waiting for Fast DDS");
+    if (cft_debug_enabled()) cft_say("%s", late_reason);
+  } else if (cft_debug_enabled()) {
+    cft_say("loaded; waiting for Fast DDS");
   }
 }
 
@@ -456,7 +493,7 @@ CFT_EXPORT const char *cft_guard_reason(void) {
 // How often each interposed member was called: 0 perform_create_new_change,
 // 1 process_reader_filter_info, 2 remove_reader_filter, 3 nested writes that went on unlocked.
 CFT_EXPORT unsigned long cft_guard_call_count(int which) {
-  if (which >= 0 && which < FN_COUNT) return __atomic_load_n(&call_counts[which], __ATOMIC_RELAXED);
-  if (which == FN_COUNT) return __atomic_load_n(&degraded_count, __ATOMIC_RELAXED);
+  if (which >= 0 && which < FN_LOCKED) return __atomic_load_n(&call_counts[which], __ATOMIC_RELAXED);
+  if (which == FN_LOCKED) return __atomic_load_n(&degraded_count, __ATOMIC_RELAXED);
   return 0;
 }

@@ -1,7 +1,9 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 """The ctypes binding to rcl: the only module that knows C signatures and struct layouts.
 
-Jazzy's rclpy exposes no content-filter API, but ``librcl.so`` exports one. Each C symbol is
+Jazzy's rclpy exposes no content-filter API, but ``librcl.so`` exports one; and its action client
+takes feedback and result responses without their sample info, which ``rcl_take`` and
+``rcl_take_response_with_info`` return. Each C symbol is
 declared once, in :data:`_SYMBOLS` below, with its argument and return types. Functions that
 return ``rcl_ret_t`` get an ``errcheck`` that turns a non-OK code into :class:`ContentFilterError`
 carrying rcl's own error string, and resets rcl's error state, so nothing fails silently.
@@ -15,8 +17,8 @@ import os
 from typing import Any, Callable, Optional, Sequence
 
 # Importing rclpy's C extension loads librcl and friends from the installed wheels; we then bind
-# to those very copies instead of guessing paths.
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy  # noqa: F401
+# to those very copies instead of guessing paths. A failed take raises its RCLError, as rclpy's.
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 
 from cft_action.errors import BindingUnavailable, ContentFilterError
 
@@ -31,6 +33,8 @@ _RET_NAMES = {
     400: 'RCL_RET_SUBSCRIPTION_INVALID',
 }
 RCL_RET_UNSUPPORTED = 3
+RCL_RET_SUBSCRIPTION_TAKE_FAILED = 401
+RCL_RET_CLIENT_TAKE_FAILED = 501
 
 
 # --- struct layouts (rcutils / rmw / rcl, Jazzy) -------------------------------------------------
@@ -50,6 +54,31 @@ class _ContentFilterOptions(ctypes.Structure):
     """``rcl_subscription_content_filter_options_t``, which wraps the rmw struct of this shape."""
 
     _fields_ = [('filter_expression', ctypes.c_char_p), ('expression_parameters', _StringArray)]
+
+
+class _Gid(ctypes.Structure):
+    _fields_ = [('implementation_identifier', ctypes.c_char_p),
+                ('data', ctypes.c_uint8 * 16)]  # RMW_GID_STORAGE_SIZE
+
+
+class _MessageInfo(ctypes.Structure):
+    """``rmw_message_info_t``."""
+
+    _fields_ = [('source_timestamp', ctypes.c_int64), ('received_timestamp', ctypes.c_int64),
+                ('publication_sequence_number', ctypes.c_uint64),
+                ('reception_sequence_number', ctypes.c_uint64),
+                ('publisher_gid', _Gid), ('from_intra_process', ctypes.c_bool)]
+
+
+class _RequestId(ctypes.Structure):
+    _fields_ = [('writer_guid', ctypes.c_uint8 * 16), ('sequence_number', ctypes.c_int64)]
+
+
+class _ServiceInfo(ctypes.Structure):
+    """``rmw_service_info_t``."""
+
+    _fields_ = [('source_timestamp', ctypes.c_int64), ('received_timestamp', ctypes.c_int64),
+                ('request_id', _RequestId)]
 
 
 class _ErrorString(ctypes.Structure):
@@ -106,6 +135,15 @@ def _check_rcl_ret(ret: int, func: Any, args: tuple) -> int:
     return ret
 
 
+def _take_failed_is_empty(ret: int, func: Any, args: tuple) -> bool:
+    """Return whether a sample was taken; raise rclpy's RCLError for a real failure, as rclpy."""
+    if ret in (RCL_RET_SUBSCRIPTION_TAKE_FAILED, RCL_RET_CLIENT_TAKE_FAILED):
+        return False
+    if ret != RCL_RET_OK:
+        raise _rclpy.RCLError(f'{func.__name__} returned {ret}: {take_rcl_error()}')
+    return True
+
+
 def _map_symbol(library: ctypes.CDLL, name: str, restype: Any, argtypes: Sequence[Any],
                 errcheck: Optional[Callable] = None) -> Any:
     try:
@@ -141,6 +179,18 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'rcl_subscription_is_valid': (_rcl, ctypes.c_bool, [_void_p], None),
     'rcl_subscription_get_topic_name': (_rcl, ctypes.c_char_p, [_void_p], None),
     'rcl_action_client_is_valid': (_rcl_action, ctypes.c_bool, [_void_p], None),
+    'rcl_client_is_valid': (_rcl, ctypes.c_bool, [_void_p], None),
+    'rcl_client_get_service_name': (_rcl, ctypes.c_char_p, [_void_p], None),
+    'rcl_take':
+        (_rcl, _rcl_ret_t, [_void_p, _void_p, ctypes.POINTER(_MessageInfo), _void_p],
+         _take_failed_is_empty),
+    'rcl_take_response_with_info':
+        (_rcl, _rcl_ret_t, [_void_p, ctypes.POINTER(_ServiceInfo), _void_p],
+         _take_failed_is_empty),
+    # The Python C API, to reach the C functions that rosidl generates for every message type.
+    'PyCapsule_GetName': (ctypes.pythonapi, ctypes.c_char_p, [ctypes.py_object], None),
+    'PyCapsule_GetPointer':
+        (ctypes.pythonapi, _void_p, [ctypes.py_object, ctypes.c_char_p], None),
 }
 
 
@@ -201,18 +251,112 @@ def is_cft_enabled(subscription_ptr: int) -> bool:
 
 def subscription_topic_name(subscription_ptr: int) -> Optional[str]:
     """Return the fully qualified topic name of an rcl subscription, or None if it is invalid."""
-    name = _lib.rcl_subscription_get_topic_name(subscription_ptr)
+    return _name_or_none(_lib.rcl_subscription_get_topic_name(subscription_ptr))
+
+
+def _client_service_name(client_ptr: int) -> Optional[str]:
+    return _name_or_none(_lib.rcl_client_get_service_name(client_ptr))
+
+
+def _name_or_none(name: Optional[bytes]) -> Optional[str]:
+    """Decode a name that rcl returned; on NULL, clear the error rcl set and return None."""
     if name is None:
         take_rcl_error()
         return None
     return name.decode()
 
 
-# --- private layout: an action client's feedback subscription -------------------------------------
+# --- taking a message with its sample info -------------------------------------------------------
 
-# Jazzy's rcl_action_client_impl_t starts with three rcl_client_t (one pointer each) followed by the
-# feedback rcl_subscription_t. This has held since Foxy, but it is private: every use is verified.
+class MessageSupport:
+    """The C functions that rosidl generates for one message type, as rclpy uses them.
+
+    :param msg_type: a message class whose type support is imported
+        (:func:`rclpy.type_support.check_for_type_support`).
+    """
+
+    def __init__(self, msg_type: Any) -> None:
+        metaclass = type(msg_type)
+        self._create = _capsule_function(
+            metaclass._CREATE_ROS_MESSAGE, ctypes.PYFUNCTYPE(ctypes.c_void_p))
+        self._destroy = _capsule_function(
+            metaclass._DESTROY_ROS_MESSAGE, ctypes.PYFUNCTYPE(None, ctypes.c_void_p))
+        self._convert_to_py = _capsule_function(
+            metaclass._CONVERT_TO_PY, ctypes.PYFUNCTYPE(ctypes.py_object, ctypes.c_void_p))
+
+    def take(self, take: Callable[[int], bool]) -> Optional[Any]:
+        """Call ``take(address of a new C message)``; return the message as Python, or None."""
+        message = self._create()
+        if not message:
+            raise MemoryError('create_ros_message returned NULL')
+        try:
+            return self._convert_to_py(message) if take(message) else None
+        finally:
+            self._destroy(message)
+
+
+def _capsule_function(capsule: Any, prototype: Any) -> Any:
+    return prototype(_lib.PyCapsule_GetPointer(capsule, _lib.PyCapsule_GetName(capsule)))
+
+
+def take_message(subscription_ptr: int,
+                 support: MessageSupport) -> tuple[Optional[Any], int]:
+    """Take one message from an rcl subscription, as ``rcl_action_take_feedback`` does.
+
+    :return: ``(message, source_timestamp)``: the publisher's clock in nanoseconds, 0 where the
+        rmw does not give it; ``(None, 0)`` when no message was there.
+    """
+    info = _MessageInfo()
+    message = support.take(lambda ros_message: _lib.rcl_take(
+        subscription_ptr, ros_message, ctypes.byref(info), None))
+    return message, (info.source_timestamp if message is not None else 0)
+
+
+def take_response(client_ptr: int,
+                  support: MessageSupport) -> tuple[Optional[int], Optional[Any], int]:
+    """Take one response from an rcl client, as ``rcl_action_take_result_response`` does.
+
+    :return: ``(sequence_number, response, source_timestamp)``, the timestamp on the server's
+        clock in nanoseconds, 0 where the rmw does not give it; ``(None, None, 0)`` when no
+        response was there.
+    """
+    info = _ServiceInfo()
+    response = support.take(lambda ros_response: _lib.rcl_take_response_with_info(
+        client_ptr, ctypes.byref(info), ros_response))
+    if response is None:
+        return None, None, 0
+    return info.request_id.sequence_number, response, info.source_timestamp
+
+
+# --- private layout: an action client's result client and feedback subscription -------------------
+
+# Jazzy's rcl_action_client_impl_t starts with three rcl_client_t (goal, cancel, result; one pointer
+# each) followed by the feedback rcl_subscription_t. This has held since Foxy, but it is private:
+# every use is verified.
+_RESULT_CLIENT_OFFSET = 2 * ctypes.sizeof(ctypes.c_void_p)
 _FEEDBACK_SUBSCRIPTION_OFFSET = 3 * ctypes.sizeof(ctypes.c_void_p)
+
+
+def _action_client_member(action_client_ptr: int, offset: int, expected: str, kind: str,
+                          is_valid: Callable[[int], bool],
+                          name_of: Callable[[int], Optional[str]]) -> tuple[Optional[int], str]:
+    """Return the address at ``offset`` in the action client's impl if it is the ``expected``."""
+    if not action_client_ptr or not _lib.rcl_action_client_is_valid(action_client_ptr):
+        return None, f'action client is not valid: {take_rcl_error()}'
+    impl = ctypes.c_void_p.from_address(action_client_ptr).value
+    if not impl:
+        return None, 'action client has no implementation'
+    candidate = impl + offset
+    # Under the expected layout the candidate is an rcl_subscription_t or rcl_client_t { impl* };
+    # under another one it is still a pointer-sized field inside rcl's own allocation, so reading
+    # it cannot fault.
+    if not is_valid(candidate):
+        return None, (f'layout check failed: no valid {kind} at the expected offset '
+                      f'({take_rcl_error()})')
+    found = name_of(candidate)
+    if found != expected:
+        return None, f'layout check failed: found {kind} {found!r}, expected {expected!r}'
+    return candidate, ''
 
 
 def action_feedback_subscription(action_client_ptr: int,
@@ -225,19 +369,20 @@ def action_feedback_subscription(action_client_ptr: int,
     :return: ``(address, '')`` when the layout check passed, or ``(None, reason)`` when it did not;
         in that case nothing at the guessed address was touched as a subscription.
     """
-    if not action_client_ptr or not _lib.rcl_action_client_is_valid(action_client_ptr):
-        return None, f'action client is not valid: {take_rcl_error()}'
-    expected = resolved_action_name + '/_action/feedback'
-    impl = ctypes.c_void_p.from_address(action_client_ptr).value
-    if not impl:
-        return None, 'action client has no implementation'
-    candidate = impl + _FEEDBACK_SUBSCRIPTION_OFFSET
-    # Under the expected layout the candidate is an rcl_subscription_t { impl* }; under another one
-    # it is still a pointer-sized field inside rcl's own allocation, so reading it cannot fault.
-    if not _lib.rcl_subscription_is_valid(candidate):
-        return None, (f'layout check failed: no valid subscription at the expected offset '
-                      f'({take_rcl_error()})')
-    found = subscription_topic_name(candidate)
-    if found != expected:
-        return None, f'layout check failed: found topic {found!r}, expected {expected!r}'
-    return candidate, ''
+    return _action_client_member(
+        action_client_ptr, _FEEDBACK_SUBSCRIPTION_OFFSET,
+        resolved_action_name + '/_action/feedback', 'topic',
+        _lib.rcl_subscription_is_valid, subscription_topic_name)
+
+
+def action_result_client(action_client_ptr: int,
+                         resolved_action_name: str) -> tuple[Optional[int], str]:
+    """Locate the result client inside an ``rcl_action_client_t``.
+
+    As :func:`action_feedback_subscription`, for the ``rcl_client_t`` of ``get_result``.
+    """
+    return _action_client_member(
+        action_client_ptr, _RESULT_CLIENT_OFFSET,
+        resolved_action_name + '/_action/get_result', 'service',
+        _lib.rcl_client_is_valid, _client_service_name)
+

@@ -5,6 +5,13 @@ An action server publishes the feedback of all goals on one topic, so a plain cl
 deserializes and drops the feedback of every other client's goals. This client asks the server's
 DataWriter, by a DDS content filter on ``goal_id.uuid``, to send it only its own goals' feedback.
 rclpy's own UUID check still guards every callback, in every mode.
+
+Feedback, status and result travel on different topics, so a goal's last feedback can arrive after
+its result. rclpy forgets a goal's feedback callback when the result arrives, and so loses that
+feedback; this client keeps the callback for a grace period, and decides by the server's own
+clock: the source timestamps of the feedback sample and of the result response. Feedback that the
+server published before the result is delivered, and feedback published after it is not, which is
+rclpy's contract.
 """
 
 from __future__ import annotations
@@ -34,13 +41,14 @@ FEEDBACK_FILTER_ENV = 'CFT_ACTION_FEEDBACK_FILTER'
 _TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
                        GoalStatus.STATUS_ABORTED})
 
-#: Seconds a finished goal keeps its callback and filter term. Feedback, status and result travel
-#: on different topics, so the last feedback may arrive after them, and much later when a sample
-#: was lost on the way: a reliable reader then holds back everything after the gap until the
-#: writer's next heartbeat (every 3 s in Fast DDS) gets it resent. Measured on a loaded 2-core
-#: machine: a 200-goal burst had feedback delivered 2.8 s after its goals' terminal status, which
-#: a 1 s grace dropped (352 of 600 messages). Ten seconds cover three heartbeat rounds. The
-#: callback is also kept until the feedback queue has been seen empty since the goal finished.
+#: Seconds a finished goal keeps its callback and filter term, for feedback that the server
+#: published before the result. Feedback, status and result travel on different topics, so the
+#: last feedback may arrive after them, and much later when a sample was lost on the way: a
+#: reliable reader then holds back everything after the gap until the writer's next heartbeat
+#: (every 3 s in Fast DDS) gets it resent. Measured on a loaded 2-core machine: a 200-goal burst
+#: had feedback delivered 2.8 s after its goals' terminal status, which a 1 s grace dropped (352
+#: of 600 messages). Ten seconds cover three heartbeat rounds. The callback is also kept until the
+#: feedback queue has been seen empty since the goal finished.
 FINISHED_GOAL_GRACE = 10.0
 
 #: Seconds between checks for finished goals to release, and of idleness (no goal sent or
@@ -59,7 +67,8 @@ class FeedbackFilterState(NamedTuple):
         server's writer.
     :ivar live_goals: goals that hold an exact term in the expression.
     :ivar feedback_taken: feedback messages taken from rcl by this client.
-    :ivar feedback_dropped: of those, messages for which this client had no feedback callback.
+    :ivar feedback_dropped: of those, messages not given to a callback: there was none for their
+        goal, or the server published them after the goal's result.
     """
 
     mode: str
@@ -124,6 +133,15 @@ class ActionClient(_RclpyActionClient):
         self._feedback_drained_at = time.monotonic()  # last wait that found no feedback queued
         self._feedback_taken = 0
         self._feedback_dropped = 0
+        # goal UUID -> source timestamp of its result response (server clock, ns; 0: unknown)
+        self._result_stamps: dict[bytes, int] = {}
+        # Where rcl's entities are. The result client is set only when both were found: feedback
+        # and results are then taken here, with their sample info, instead of by rclpy.
+        self._feedback_subscription_ptr: Optional[int] = None
+        self._feedback_subscription_reason = ''
+        self._result_client_ptr: Optional[int] = None
+        self._feedback_support: Optional[_rcl.MessageSupport] = None
+        self._result_support: Optional[_rcl.MessageSupport] = None
         self._install_before_first_wait(node, action_type, action_name, kwargs)
         self._release_timer = node.create_timer(
             RELEASE_CHECK_PERIOD, self._release_finished_goals, callback_group=self.callback_group)
@@ -145,7 +163,9 @@ class ActionClient(_RclpyActionClient):
 
         def install_then_add(waitable) -> None:
             if waitable is self:
-                self._install_filter(node.resolve_topic_name(action_name))
+                resolved_action_name = node.resolve_topic_name(action_name)
+                self._locate_entities(resolved_action_name)
+                self._install_filter()
             add_waitable(waitable)
 
         node.add_waitable = install_then_add  # type: ignore[method-assign]
@@ -159,7 +179,24 @@ class ActionClient(_RclpyActionClient):
         if not self._installed:
             self._fall_back('rclpy did not add the client through Node.add_waitable')
 
-    def _install_filter(self, resolved_action_name: str) -> None:
+    def _locate_entities(self, resolved_action_name: str) -> None:
+        """Find the feedback subscription and result client inside rcl's action client."""
+        pointer = self._client_handle.pointer
+        self._feedback_subscription_ptr, self._feedback_subscription_reason = (
+            _rcl.action_feedback_subscription(pointer, resolved_action_name))
+        self._result_client_ptr, reason = _rcl.action_result_client(pointer, resolved_action_name)
+        reason = reason or self._feedback_subscription_reason
+        if reason:
+            self._result_client_ptr = None
+            self._cft_logger.warning(
+                'feedback is taken as by rclpy and dropped once the goal result arrives, even '
+                f'feedback the server published before the result: {reason}')
+            return
+        self._feedback_support = _rcl.MessageSupport(self._action_type.Impl.FeedbackMessage)
+        self._result_support = _rcl.MessageSupport(
+            self._action_type.Impl.GetResultService.Response)
+
+    def _install_filter(self) -> None:
         self._installed = True
         mode = self._state.mode
         if mode == 'off':
@@ -168,10 +205,9 @@ class ActionClient(_RclpyActionClient):
         if not is_content_filter_supported(self._node):
             self._fall_back('the rmw implementation has no content filter')
             return
-        pointer, reason = _rcl.action_feedback_subscription(
-            self._client_handle.pointer, resolved_action_name)
+        pointer = self._feedback_subscription_ptr
         if pointer is None:
-            self._fall_back(reason)
+            self._fall_back(self._feedback_subscription_reason)
             return
         plan = GoalFilterPlan(mode)
         expression = plan.initial()
@@ -268,6 +304,8 @@ class ActionClient(_RclpyActionClient):
         if not isinstance(goal, self._action_type.Goal):
             raise TypeError()
         with self._filter_lock:
+            if goal_uuid is not None and feedback_callback is not None:
+                self._forget_finished(bytes(goal_uuid.uuid))
             if self._plan is not None:
                 if goal_uuid is None:
                     raw = (self._plan.uuid_for_feedback() if feedback_callback is not None
@@ -284,9 +322,13 @@ class ActionClient(_RclpyActionClient):
 
     # --- goal bookkeeping -------------------------------------------------------------------------
 
+    def _forget_finished(self, goal_uuid: bytes) -> None:
+        """A new goal reuses this UUID: what the last one left is not its own."""
+        self._finished.pop(goal_uuid, None)
+        self._result_stamps.pop(goal_uuid, None)
+
     def _watch(self, goal_uuid: bytes) -> None:
         self._last_activity = time.monotonic()
-        self._finished.pop(goal_uuid, None)
         if self._plan is None or not self._plan.watch(goal_uuid):
             return
         if self._plan.mode == 'client' and not self._logged_explicit_uuid:
@@ -313,14 +355,66 @@ class ActionClient(_RclpyActionClient):
         return ready
 
     def take_data(self) -> dict:
-        """Take stuff from lower level so the wait set doesn't immediately wake again."""
+        """Take stuff from lower level so the wait set doesn't immediately wake again.
+
+        As rclpy's, except that the result response and the feedback are taken with their source
+        timestamps, and feedback that the server published after its goal's result is dropped.
+        """
+        result_ready, feedback_ready = self._is_result_response_ready, self._is_feedback_ready
+        if self._result_client_ptr is not None:
+            # rclpy's takes drop the sample info: these two are taken below, with it.
+            self._is_result_response_ready = self._is_feedback_ready = False
         data = super().take_data()
+        if 'result' in data:
+            self._note_result(data['result'][0], 0)
+        elif (result_ready and self._result_client_ptr is not None
+              and self._result_support is not None):
+            sequence_number, response, stamp = _rcl.take_response(
+                self._result_client_ptr, self._result_support)
+            if response is not None and sequence_number is not None:
+                data['result'] = (sequence_number, response)
+                self._note_result(sequence_number, stamp)
+        stamp = 0
+        # The supports exist exactly when both entities were found (_locate_entities).
+        if (feedback_ready and self._feedback_subscription_ptr is not None
+                and self._feedback_support is not None):
+            feedback, stamp = _rcl.take_message(
+                self._feedback_subscription_ptr, self._feedback_support)
+            if feedback is not None:
+                data['feedback'] = feedback
         feedback = data.get('feedback')
         if feedback is not None:
             self._feedback_taken += 1
-            if bytes(feedback.goal_id.uuid) not in self._feedback_callbacks:
+            goal_uuid = bytes(feedback.goal_id.uuid)
+            if (goal_uuid not in self._feedback_callbacks
+                    or self._published_after_result(goal_uuid, stamp)):
                 self._feedback_dropped += 1
+                del data['feedback']
         return data
+
+    def _note_result(self, sequence_number: int, stamp: int) -> None:
+        goal_id = self._result_sequence_number_to_goal_id.get(sequence_number)
+        if goal_id is None:
+            return
+        goal_uuid = bytes(goal_id.uuid)
+        with self._filter_lock:
+            if goal_uuid in self._feedback_callbacks:
+                # The first result answers the goal; a later request is answered later still.
+                self._result_stamps.setdefault(goal_uuid, stamp)
+
+    def _published_after_result(self, goal_uuid: bytes, stamp: int) -> bool:
+        """Whether the server published this feedback after it sent the goal's result.
+
+        Both timestamps come from the server's clock: it wrote the result response only after its
+        execute callback had returned, so feedback published in there is stamped earlier.
+        """
+        with self._filter_lock:
+            result_stamp = self._result_stamps.get(goal_uuid)
+        if result_stamp is None:
+            return False
+        if not (result_stamp and stamp):
+            return True  # no ordering evidence: as rclpy, which forgets the callback at the result
+        return stamp > result_stamp
 
     async def execute(self, taken_data: dict) -> None:
         """Execute work after data has been taken from a ready wait set.
@@ -362,6 +456,7 @@ class ActionClient(_RclpyActionClient):
                 if (now - finished_at >= FINISHED_GOAL_GRACE
                         and finished_at < self._feedback_drained_at):
                     del self._finished[goal_uuid]
+                    self._result_stamps.pop(goal_uuid, None)
                     self._feedback_callbacks.pop(goal_uuid, None)
                     if self._plan is not None:
                         self._plan.finish(goal_uuid)

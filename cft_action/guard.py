@@ -31,7 +31,8 @@ from typing import Mapping, Optional
 
 from cft_action.errors import CftActionError
 
-__all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts', 'environment']
+__all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts',
+           'filter_counts', 'environment']
 
 #: Name of the extension module that setup.py builds from ``_guard.c``.
 _MODULE = '_cftguard'
@@ -77,6 +78,8 @@ def _preloaded() -> Optional[ctypes.CDLL]:
     process.cft_guard_reason.restype = ctypes.c_char_p
     process.cft_guard_call_count.argtypes = [ctypes.c_int]
     process.cft_guard_call_count.restype = ctypes.c_ulong
+    process.cft_guard_filter_count.argtypes = [ctypes.c_int]
+    process.cft_guard_filter_count.restype = ctypes.c_ulong
     return process
 
 
@@ -119,6 +122,35 @@ def call_counts() -> dict[str, int]:
     names = ('perform_create_new_change', 'process_reader_filter_info', 'remove_reader_filter',
              'nested_unlocked')
     return {name: int(process.cft_guard_call_count(i)) for i, name in enumerate(names)}
+
+
+#: The counters of cft_guard_filter_count() in _guard_filter.c, in its order.
+FILTER_COUNTERS = ('uuid_verdicts', 'fastdds_verdicts', 'compiled', 'not_compiled', 'dropped',
+                   'evicted', 'foreign_instance', 'verified', 'mismatches')
+
+
+def filter_counts() -> dict[str, int]:
+    """Return the counters of the guard's filter verdicts in this process.
+
+    The guard answers a writer-side filter whose every term is ``goal_id.uuid[i] = value`` from the
+    sample's UUID bytes, instead of letting Fast DDS deserialize the sample once per filtered
+    reader. Keys:
+
+    - ``uuid_verdicts``: verdicts given from the UUID bytes;
+    - ``fastdds_verdicts``: verdicts left to Fast DDS (other filters, or none compiled);
+    - ``compiled`` / ``not_compiled``: reader filters the guard compiled, or left to Fast DDS;
+    - ``dropped``, ``evicted``, ``foreign_instance``: compiled filters forgotten because their
+      reader went away or changed unseen, because the table was full, or because a verdict came for
+      another filter instance;
+    - ``verified`` / ``mismatches``: with ``CFT_GUARD_VERIFY=1``, verdicts also asked of Fast DDS,
+      and how many of them disagreed (0, or the guard is wrong).
+
+    An empty dict when the guard is not preloaded.
+    """
+    process = _preloaded()
+    if process is None:
+        return {}
+    return {name: int(process.cft_guard_filter_count(i)) for i, name in enumerate(FILTER_COUNTERS)}
 
 
 def environment(env: Optional[Mapping[str, str]] = None) -> dict[str, str]:

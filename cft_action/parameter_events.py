@@ -29,6 +29,12 @@ filter before any executor can see it, and every later change is an in-place cha
 non-empty expression to another: "no node" is an expression that never matches, and "every node"
 is ``node = node``, which always does.
 
+When a change is in force. A change reaches each publisher by discovery, some milliseconds later,
+and until then that publisher applies its previous filter; the middleware acknowledges nothing.
+:attr:`ParameterEventHandler.parameter_event_filter_state` therefore reports a change as not
+``confirmed`` until :meth:`ParameterEventHandler.wait_for_filter` has proven, by a round trip to
+each publishing participant that discovery orders after the change, that it has arrived.
+
 The node's time source does not depend on this subscription: rclpy's
 :class:`rclpy.time_source.TimeSource` follows ``use_sim_time`` through
 ``Node.add_on_set_parameters_callback``, not through ``/parameter_events``, so no filter set here
@@ -47,13 +53,16 @@ nodes publish parameter events often, run them under the guard.
 from __future__ import annotations
 
 import threading
+import time
 from collections import Counter
 from typing import Callable, NamedTuple, Optional, Sequence, Union
 
 import rclpy
 from rcl_interfaces.msg import ParameterEvent
+from rcl_interfaces.srv import GetParameterTypes
 from rclpy.callback_groups import CallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_event_handler import (
@@ -61,7 +70,7 @@ from rclpy.parameter_event_handler import (
     ParameterEventCallbackHandle,
     ParameterEventHandler as _RclpyParameterEventHandler,
 )
-from rclpy.qos import qos_profile_parameter_events, QoSProfile
+from rclpy.qos import qos_profile_parameter_events, qos_profile_services_default, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.subscription import Subscription
 
@@ -96,6 +105,16 @@ NO_NODES = never_match_on(NODE_FIELD)
 #: Fast DDS accepts at most ``%0`` .. ``%99``.
 MAX_EXPRESSION_PARAMETERS = 100
 
+#: How often wait_for_filter polls, and how long a probe request may go unanswered before it is
+#: sent again (a server that has not yet matched the client's response reader drops the reply).
+_PROBE_POLL_S = 0.01
+_PROBE_RESEND_S = 0.5
+#: How long wait_for_filter probes one node of a participant before it tries the next one.
+_PROBE_TURN_S = 2.0
+
+#: The length of a GUID prefix, which names the participant, at the start of an endpoint GID.
+_GUID_PREFIX_LEN = 12
+
 _EVENT_CALLBACK_REASON = ('a parameter event callback (add_parameter_event_callback) is registered '
                           'and needs the events of every node')
 
@@ -107,15 +126,22 @@ class ParameterEventFilterState(NamedTuple):
         needs every event), ``'user'`` (an expression set by
         :meth:`ParameterEventHandler.set_parameter_event_filter`) or ``'off'`` (no content filter
         can be used; see ``reason``).
-    :ivar active: whether the middleware narrows what the subscription receives.
+    :ivar active: whether the filter set on the subscription narrows what it receives.
     :ivar reason: why the filter is not active; empty when it is.
-    :ivar expression: the filter expression in force; empty when not active.
+    :ivar expression: the filter expression set on the subscription; empty when not active. The
+        publishers apply it once discovery has brought it to them: see ``confirmed``.
     :ivar expression_parameters: its parameters, as DDS literals; empty when not active.
     :ivar updates: filter changes sent after the subscription was created; each one reaches every
         ``/parameter_events`` writer in the domain.
     :ivar watched_nodes: fully qualified names of the nodes that parameter callbacks watch, sorted.
     :ivar events_received: parameter events taken by the subscription, whichever callbacks they
         reached.
+    :ivar confirmed: whether the publishers are known to apply the filter set on the subscription.
+        True for the filter the subscription was created with, which a publisher receives with the
+        match itself. After a change it is False: the change travels by discovery and the
+        middleware acknowledges nothing, so until it arrives a publisher still applies its previous
+        filter, narrower or wider, and drops what that one rejects (in mode ``'all'`` too).
+        :meth:`ParameterEventHandler.wait_for_filter` proves the arrival and sets it back to True.
     """
 
     mode: str
@@ -126,6 +152,7 @@ class ParameterEventFilterState(NamedTuple):
     updates: int
     watched_nodes: tuple[str, ...]
     events_received: int
+    confirmed: bool
 
 
 def _is_quotable(node_name: str) -> bool:
@@ -245,8 +272,9 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         self._user_filter: Optional[ContentFilterOptions] = None
         self._installed: Optional[ContentFilterOptions] = None  # None: no filter we may change
         self._updates = 0
+        self._confirmed_updates = 0  # the value of _updates that wait_for_filter last proved
         self._destroyed = False
-        self._state = ParameterEventFilterState('nodes', False, '', '', (), 0, (), 0)
+        self._state = ParameterEventFilterState('nodes', False, '', '', (), 0, (), 0, True)
 
         self.parameter_event_subscription = self._subscribe(
             callback_group, event_callbacks, qos_overriding_options, raw)
@@ -323,11 +351,14 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             mode=mode, active=shown is not None, reason=reason,
             expression=shown.filter_expression if shown is not None else '',
             expression_parameters=tuple(shown.expression_parameters) if shown is not None else (),
-            updates=self._updates, watched_nodes=tuple(sorted(self._watched)), events_received=0)
+            updates=self._updates, watched_nodes=tuple(sorted(self._watched)), events_received=0,
+            confirmed=self._confirmed_updates == self._updates)
 
     def _fall_back(self, reason: str, *, log: bool = True) -> None:
         self._installed = None
-        self._state = self._state._replace(mode='off', active=False, reason=reason)
+        self._state = self._state._replace(mode='off', active=False, reason=reason,
+                                           updates=self._updates,
+                                           confirmed=self._confirmed_updates == self._updates)
         if log:
             self._cft_logger.warning(
                 'parameter event filter not used, all parameter events are received as with '
@@ -359,7 +390,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         If no other callback watches the node, the filter grows to include it after the callback is
         registered. The change reaches the publishers by discovery; until it arrives there, they
         still apply the previous filter, so an event of that node published in the meantime can be
-        missed.
+        missed. :meth:`wait_for_filter` returns once it has arrived.
 
         :param parameter_name: Name of a parameter to tie callback to
         :param node_name: Name of a node, that the parameter should be related to
@@ -411,6 +442,9 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         Such a callback is not tied to a node, so while one is registered the handler lets the
         events of every node through, as rclpy's does; :attr:`parameter_event_filter_state` then
         has mode ``'all'``. A filter set with :meth:`set_parameter_event_filter` stays in force.
+        The change reaches the publishers by discovery: an event that the previous filter rejects
+        and that is published before the change arrives is missed. :meth:`wait_for_filter`
+        returns once it has arrived.
 
         :param callback: A callable to be referenced on a ParameterEvent
 
@@ -523,3 +557,118 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             if self._destroyed or not is_filtered(subscription):
                 return ContentFilterOptions('', [])
             return get_content_filter(subscription)
+
+    def wait_for_filter(self, timeout_sec: Optional[float] = None) -> bool:
+        """
+        Wait until the ``/parameter_events`` publishers apply the current filter.
+
+        A filter change travels to the publishers by discovery, and the middleware acknowledges
+        nothing: until the change arrives, a publisher applies its previous filter and drops the
+        events that one rejects. This method waits for a proof of arrival from every other
+        participant (process) that hosts a ``/parameter_events`` publisher known to this node: a
+        reply of a parameter service (``get_parameter_types``, asked for no names) of one of its
+        nodes, to a client created after the change. Discovery announces that client's response
+        reader after the change, in the same ordered stream, and a participant can only reply once
+        it has matched that reader, so by then every writer there has processed the change.
+
+        The publishers' nodes must be spun, for their parameter services to reply. Publishers in
+        this node's own participant need no proof (Fast DDS does not filter in the writer within a
+        process), and publishers that have not matched the subscription yet receive the current
+        filter with the match.
+
+        :param timeout_sec: Seconds to wait. Block forever if ``None`` or negative; don't wait
+            if 0.
+        :return: ``True`` if the current filter is known to be applied; then
+            :attr:`parameter_event_filter_state` has ``confirmed=True`` until the next change.
+            ``False`` on timeout, if the filter changed meanwhile, or if the handler was destroyed.
+        """
+        deadline = None
+        if timeout_sec is not None and timeout_sec >= 0:
+            deadline = time.monotonic() + timeout_sec
+        with self._filter_lock:
+            if self._destroyed:
+                return False
+            target = self._updates
+            if self._confirmed_updates == target:
+                return True
+        # service -> (participant, client, when its last request was sent)
+        probes: dict[str, tuple] = {}
+        turns: dict[bytes, tuple[int, float]] = {}  # participant -> (node index, since when)
+        answered: set[bytes] = set()
+        try:
+            while True:
+                now = time.monotonic()
+                pending = {participant: services
+                           for participant, services in self._probe_services().items()
+                           if participant not in answered}
+                for participant, services in pending.items():
+                    self._probe(participant, services, probes, turns, now)
+                for participant, client, _ in probes.values():
+                    with client:
+                        header, _ = client.take_response(GetParameterTypes.Response)
+                    if header is not None:
+                        answered.add(participant)
+                if not pending:
+                    break
+                if deadline is not None and now >= deadline:
+                    return False
+                time.sleep(_PROBE_POLL_S)
+        finally:
+            for _, client, _ in probes.values():
+                client.destroy_when_not_in_use()
+        with self._filter_lock:
+            if self._destroyed or self._updates != target:
+                return False
+            self._confirmed_updates = target
+            self._publish_state()
+        return True
+
+    def _probe_services(self) -> dict[bytes, list[str]]:
+        """Map each other participant with a parameter event publisher to its nodes' services.
+
+        A participant whose nodes' names are not known yet maps to no service: it stays pending.
+        """
+        name, namespace = self.node.get_name(), self.node.get_namespace()
+        own = {bytes(info.endpoint_gid[:_GUID_PREFIX_LEN])
+               for topic in (PARAMETER_EVENTS_TOPIC, '/rosout')
+               for info in self.node.get_publishers_info_by_topic(topic)
+               if (info.node_name, info.node_namespace) == (name, namespace)}
+        services: dict[bytes, list[str]] = {}
+        for info in self.node.get_publishers_info_by_topic(PARAMETER_EVENTS_TOPIC):
+            participant = bytes(info.endpoint_gid[:_GUID_PREFIX_LEN])
+            if participant in own:
+                continue
+            candidates = services.setdefault(participant, [])
+            if info.node_name.startswith('_NODE_') or info.node_namespace.startswith('_NODE_'):
+                continue  # rmw's placeholder while the node's name is not yet discovered
+            service = f"{info.node_namespace.rstrip('/')}/{info.node_name}/get_parameter_types"
+            if service not in candidates:
+                candidates.append(service)
+        return services
+
+    def _probe(self, participant: bytes, services: list[str], probes: dict[str, tuple],
+               turns: dict[bytes, tuple[int, float]], now: float) -> None:
+        """Send, or send again, the probe request to one of ``participant``'s ``services``.
+
+        A node whose service has not replied for _PROBE_TURN_S (not spun, or its server has not
+        matched the client yet) hands the probe on to the participant's next node.
+        """
+        if not services:
+            return
+        index, since = turns.setdefault(participant, (0, now))
+        if now - since >= _PROBE_TURN_S and len(services) > 1:
+            index, since = index + 1, now
+            turns[participant] = (index, since)
+        service = services[index % len(services)]
+        if service not in probes:
+            with self.node.handle:
+                client = _rclpy.Client(self.node.handle, GetParameterTypes, service,
+                                       qos_profile_services_default.get_c_qos_profile())
+            probes[service] = (participant, client, None)
+        _, client, sent = probes[service]
+        if sent is not None and now - sent < _PROBE_RESEND_S:
+            return
+        with client:
+            if client.service_server_is_available():
+                client.send_request(GetParameterTypes.Request())
+                probes[service] = (participant, client, now)

@@ -19,6 +19,7 @@ import copy
 import importlib
 import math
 import os
+import re
 import sys
 import time
 from collections import deque, OrderedDict
@@ -212,6 +213,21 @@ def _slot_kind(slot) -> sql.Kind:
     raise LookupError(f'has the type {_type_name(slot)}, which is not primitive')
 
 
+def _namespaced_class(namespaces: list[str], name: str):
+    """The Python class of a rosidl type, for messages and the parts of services and actions.
+
+    ``test_msgs/action/Fibonacci_Feedback`` is not an attribute of ``test_msgs.action``, only of
+    its generated module ``test_msgs.action._fibonacci`` (the action's name in snake case).
+    """
+    package = importlib.import_module('.'.join(namespaces))
+    if hasattr(package, name):
+        return getattr(package, name)
+    interface = name.split('_', 1)[0]
+    snake = re.sub(r'(?<=[a-z0-9])([A-Z])|(?<=[A-Z])([A-Z])(?=[a-z])', r'_\1\2', interface)
+    module = importlib.import_module(f'{package.__name__}._{snake.lower()}')
+    return getattr(module, name)
+
+
 def message_schema(msg_type) -> sql.Schema:
     """The :data:`cft_action.sql.Schema` of a ROS message type: the kind of each field path.
 
@@ -243,8 +259,7 @@ def message_schema(msg_type) -> sql.Schema:
                 if last:
                     raise LookupError(f"is a message ({'/'.join(slot.namespaced_name())}), not "
                                       'a primitive value: name one of its fields')
-                module = importlib.import_module('.'.join(slot.namespaces))
-                current = getattr(module, slot.name)
+                current = _namespaced_class(slot.namespaces, slot.name)
             elif not last:
                 raise LookupError(f'{name} is not a message, so it has no field '
                                   f'{path[step + 1][0]}')

@@ -56,6 +56,8 @@ from unique_identifier_msgs.msg import UUID
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 CONFIGS = ('rclpy', 'client', 'goals', 'upstream')
+#: Seconds before the probe goal, or its result request, is sent again.
+PROBE_RESEND_S = 2.0
 
 _TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
                        GoalStatus.STATUS_ABORTED})
@@ -192,16 +194,26 @@ class LoadClient:
 
 
 def probe(node: Node, executor: SingleThreadedExecutor, client: Any, timeout: float) -> bool:
-    """Complete one goal of order 0, which proves that all endpoints matched."""
+    """Complete one goal of order 0, which proves that all endpoints matched.
+
+    The goal and its result request are resent every :data:`PROBE_RESEND_S`: a response written
+    before the server's response writer matched this client's reader is lost for good (volatile),
+    with plain rclpy too, so waiting longer for it would only time out.
+    """
+    deadline = time.monotonic() + timeout
     if not client.wait_for_server(timeout_sec=timeout):
         return False
-    future = client.send_goal_async(Fibonacci.Goal(order=0))
-    executor.spin_until_future_complete(future, timeout_sec=timeout)
-    if not future.done():
-        return False
-    result = future.result().get_result_async()
-    executor.spin_until_future_complete(result, timeout_sec=timeout)
-    return result.done()
+    while time.monotonic() < deadline:
+        future = client.send_goal_async(Fibonacci.Goal(order=0))
+        executor.spin_until_future_complete(future, timeout_sec=PROBE_RESEND_S)
+        if not future.done():
+            continue
+        while time.monotonic() < deadline:
+            result = future.result().get_result_async()
+            executor.spin_until_future_complete(result, timeout_sec=PROBE_RESEND_S)
+            if result.done():
+                return True
+    return False
 
 
 def read_commands(commands: queue.Queue, wake: Any) -> None:

@@ -73,6 +73,9 @@ class LoadSpec:
     :ivar drain_timeout: seconds a phase may take after its goals finished, for slow clients.
     :ivar goals_timeout: seconds the goals of a phase may take; None: 120 + 30 x their nominal
         duration (a saturated machine runs them several times slower).
+    :ivar settle_s: seconds of quiet after the last goal before a phase is accounted (see
+        :data:`SETTLE_S`).
+    :ivar server_env: extra environment of the server process (e.g. the guard's settings).
     """
 
     clients: int = 8
@@ -83,6 +86,8 @@ class LoadSpec:
     network: str = 'auto'
     drain_timeout: float = 300.0
     goals_timeout: Optional[float] = None
+    settle_s: float = SETTLE_S
+    server_env: dict[str, str] = dataclasses.field(default_factory=dict)
 
     @property
     def total_goals(self) -> int:
@@ -153,7 +158,7 @@ class LoadRun:
                 '--result-timeout', str(RESULT_TIMEOUT_S)]
         if self.topology:
             argv = self.topology.command(self.topology.server, argv)
-        self.server = Proc('server', argv, guard.environment(self.env))
+        self.server = Proc('server', argv, guard.environment({**self.env, **spec.server_env}))
         try:
             self.server.expect('READY', 60)
         except Exception:
@@ -229,7 +234,7 @@ class LoadRun:
             t = time.monotonic()
             if now != last:
                 last, stable_since = now, t
-            if t - stable_since >= 1.5 and t - since >= SETTLE_S:
+            if t - stable_since >= 1.5 and t - since >= self.spec.settle_s:
                 return
             if t > deadline:
                 self.progress(f'    drain timeout after {self.spec.drain_timeout:.0f} s; '
@@ -260,7 +265,7 @@ class LoadRun:
             go = time.monotonic()
             for client in clients:
                 client.send('go')
-            self._wait_for_goals(before)
+            done = self._wait_for_goals(before)
             goals_s = time.monotonic() - go
             self.progress(f'[{CONFIG_LABELS[config]}] goals finished in {goals_s:.1f} s; '
                           'waiting for the clients to take the rest')
@@ -287,6 +292,11 @@ class LoadRun:
             'published': after['published'] - before['published'],
             'accepted': after['accepted'] - before['accepted'],
             'server_cpu_s': after['cpu_s'] - before['cpu_s'],
+            'server_cpu_goals_s': done['cpu_s'] - before['cpu_s'],
+            'published_at_goals': done['published'] - before['published'],
+            'timed_out': done.get('timed_out', False),
+            'guard_filter': {k: v - before.get('guard_filter', {}).get(k, 0)
+                             for k, v in after.get('guard_filter', {}).items()},
             'late_ticks': after['late_ticks'] - before['late_ticks'],
             'intervals': after['intervals'] - before['intervals'],
             'interval_s': after['interval_s'] - before['interval_s'],
@@ -338,6 +348,11 @@ def summarize(phase: dict[str, Any], spec: LoadSpec, bytes_method: str) -> dict[
         'client_cpu_s': sum(c['cpu_s'] for c in clients),
         'client_cpu_s_per_client': mean(c['cpu_s'] for c in clients),
         'server_cpu_s': phase['server_cpu_s'],
+        # The server's side, from go until its last goal finished: what its publishing achieved.
+        'server_msgs_per_s': (phase['published_at_goals'] / phase['goals_s']
+                              if phase['goals_s'] else None),
+        'server_cpu_ms_per_msg': (1000 * phase['server_cpu_goals_s'] / phase['published_at_goals']
+                                  if phase['published_at_goals'] else None),
         'updates': updates,
         'updates_per_goal': updates / spec.total_goals,
         'recreations': sum(c.get('recreations', 0) for c in clients),
@@ -366,7 +381,8 @@ def add_ratios(phases: list[dict[str, Any]]) -> None:
     if plain is None:
         return
     keys = {'foreign': 'foreign_per_client', 'bytes': 'bytes_per_client',
-            'cpu': 'client_cpu_s', 'p50': 'latency_p50_ms', 'p99': 'latency_p99_ms'}
+            'cpu': 'client_cpu_s', 'p50': 'latency_p50_ms', 'p99': 'latency_p99_ms',
+            'server_rate': 'server_msgs_per_s', 'server_cpu': 'server_cpu_ms_per_msg'}
     for phase in phases:
         s = phase['summary']
         s['ratio_to_plain'] = {name: (s[k] / plain[k] if s[k] is not None and plain[k] else None)
@@ -423,7 +439,7 @@ def format_table(result: dict[str, Any]) -> str:
     """The per-configuration table: absolute figures, then ratios to plain rclpy."""
     spec = result['spec']
     rows = [('configuration', 'own/cl', 'foreign/cl', 'kB rx/cl', 'rx/own', 'CPU s',
-             'updates', 'upd/goal', 'p50 ms', 'p99 ms', 'rate Hz')]
+             'updates', 'upd/goal', 'p50 ms', 'p99 ms', 'rate Hz', 'srv msg/s', 'srv ms/msg')]
     for phase in result['phases']:
         s = phase['summary']
         rows.append((CONFIG_LABELS[phase['config']], _fmt(s['own_per_client']),
@@ -431,13 +447,16 @@ def format_table(result: dict[str, Any]) -> str:
                      _fmt(s.get('bytes_to_own_feedback'), '.2f'), _fmt(s['client_cpu_s'], '.2f'),
                      str(s['updates']), _fmt(s['updates_per_goal'], '.2f'),
                      _fmt(s['latency_p50_ms'], '.2f'), _fmt(s['latency_p99_ms'], '.2f'),
-                     _fmt(s['achieved_rate_hz'], '.0f')))
-    ratio_rows = [('ratio to plain', 'foreign', 'bytes', 'CPU', 'p50', 'p99')]
+                     _fmt(s['achieved_rate_hz'], '.0f'), _fmt(s['server_msgs_per_s'], '.0f'),
+                     _fmt(s['server_cpu_ms_per_msg'], '.3f')))
+    ratio_rows = [('ratio to plain', 'foreign', 'bytes', 'CPU', 'p50', 'p99', 'srv msg/s',
+                   'srv ms/msg')]
     for phase in result['phases']:
         r = phase['summary'].get('ratio_to_plain')
         if r:
             ratio_rows.append((CONFIG_LABELS[phase['config']], *(
-                _fmt(r[k], '.3f') for k in ('foreign', 'bytes', 'cpu', 'p50', 'p99'))))
+                _fmt(r[k], '.3f') for k in ('foreign', 'bytes', 'cpu', 'p50', 'p99',
+                                            'server_rate', 'server_cpu'))))
     first = result['phases'][0]['summary']
     header = (f"N = {spec['clients']} clients x M = {spec['goals']} goals, {spec['order']} "
               f"feedback per goal at {spec['rate_hz']:g} Hz, {first['feedback_message_bytes']} B "
@@ -446,7 +465,9 @@ def format_table(result: dict[str, Any]) -> str:
     notes = [f"note: {result['network_note']}",
              'note: CPU s = user + system seconds of all client processes, from go to the end of '
              'the phase; latency from the server\'s publish to the user callback; rate Hz = '
-             'feedback per second per goal that the server achieved']
+             'feedback per second per goal that the server achieved; srv msg/s and srv ms/msg = '
+             'feedback the server published per second, and its CPU milliseconds per message, '
+             'from go until its last goal finished']
     return '\n'.join([header, _grid(rows), '', _grid(ratio_rows), *notes])
 
 

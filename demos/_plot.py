@@ -28,7 +28,7 @@ def demo_figure(result: dict[str, Any], path: Path) -> Path:
     colours = [COLOURS[p['config']] for p in phases]
     s = [p['summary'] for p in phases]
     x = range(len(phases))
-    fig, axes = plt.subplots(2, 3, figsize=(14, 8.2))
+    fig, axes = plt.subplots(2, 4, figsize=(18, 8.2))
 
     ax = axes[0][0]
     own = [v['own_per_client'] for v in s]
@@ -76,9 +76,21 @@ def demo_figure(result: dict[str, Any], path: Path) -> Path:
     ax.set_title('filter updates per goal\n(each one an event at the server\'s writer)')
     _annotate(ax, x, per_goal, [f'{v:.2f}' for v in per_goal])
 
+    ax = axes[0][3]
+    rate = [v['server_msgs_per_s'] or 0 for v in s]
+    ax.bar(x, rate, color=colours)
+    ax.set_title("server: feedback published per second\n(go to its last goal; higher is better)")
+    _annotate(ax, x, rate, [f'{v:.0f}' for v in rate])
+
+    ax = axes[1][3]
+    server_cpu = [v['server_cpu_ms_per_msg'] or 0 for v in s]
+    ax.bar(x, server_cpu, color=colours)
+    ax.set_title('server: CPU ms per feedback message\n(user + system; lower is better)')
+    _annotate(ax, x, server_cpu, [f'{v:.3f}' for v in server_cpu])
+
     ax = axes[1][2]
     ratios = [p['summary'].get('ratio_to_plain') or {} for p in phases]
-    keys = ('foreign', 'bytes', 'cpu', 'p99')
+    keys = ('foreign', 'bytes', 'cpu', 'p99', 'server_cpu')
     width = 0.8 / max(1, len(phases))
     for j, (phase, r) in enumerate(zip(phases, ratios)):
         positions = [k + (j - (len(phases) - 1) / 2) * width for k in range(len(keys))]
@@ -89,13 +101,14 @@ def demo_figure(result: dict[str, Any], path: Path) -> Path:
             for position, value in zip(positions, values):
                 ax.text(position, value, f'{value:.2f}', ha='center', va='bottom', fontsize=7,
                         rotation=90)
-    ax.set_xticks(range(len(keys)), ['foreign msgs', 'bytes', 'client CPU', 'p99 latency'])
+    ax.set_xticks(range(len(keys)), ['foreign\nmsgs', 'bytes', 'client\nCPU', 'p99\nlatency',
+                                     'server\nCPU/msg'], fontsize=8)
     ax.set_ylim(0, 1.25)
     ax.axhline(1.0, color='k', lw=0.8)
     ax.set_title('ratio to plain rclpy (lower is better)')
     ax.legend(fontsize=8, loc='upper right')
 
-    for ax in list(axes.flat)[:5]:  # the sixth has its own ticks
+    for ax in (*axes[0], axes[1][0], axes[1][1], axes[1][3]):  # the ratios have their own ticks
         ax.set_xticks(list(x), labels, fontsize=9)
     first = s[0]
     fig.suptitle(f"{spec['clients']} client processes x {spec['goals']} goals, "

@@ -29,7 +29,7 @@ watcher then has the counters from just before a crash). The JSON holds ``t`` (m
 ``late_ticks`` (ticks that started more than a period late: the server could not keep the rate),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
-line), ``guard_calls`` (its call counters) and ``writers`` (the GUIDs of the feedback and status
+line), ``guard_calls`` and ``guard_filter`` (its call and filter-verdict counters) and ``writers`` (the GUIDs of the feedback and status
 writers, in hex). End of input stops the server.
 """
 
@@ -199,7 +199,8 @@ class TickingServer:
                     'accepted': self.accepted, 'active': len(self.active),
                     'late_ticks': self.late_ticks, 'intervals': self.intervals,
                     'interval_s': self.interval_s, 'cpu_s': usage.ru_utime + usage.ru_stime,
-                    'guard': guard.status(), 'guard_calls': guard.call_counts()}
+                    'guard': guard.status(), 'guard_calls': guard.call_counts(),
+                    'guard_filter': guard.filter_counts()}
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:

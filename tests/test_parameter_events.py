@@ -1,5 +1,7 @@
 """The filtered ParameterEventHandler against parameter events published by another process."""
 
+import os
+import signal
 import time
 
 import pytest
@@ -87,18 +89,19 @@ def sync(ros, handler, child, names, timeout=SYNC_TIMEOUT):
     assert handler.parameter_event_filter_state.updates == updates, 'sync changed the filter'
 
 
-def until_nodes(ros, handler, child, events, nodes, timeout=SYNC_TIMEOUT):
-    """Burst until the events that arrive come from exactly ``nodes``: the new filter is in force.
+def in_force(ros, handler, names, timeout=SYNC_TIMEOUT):
+    """Return once the publishers of ``names`` apply the handler's current filter.
 
-    Used where a filter change adds no node to sync on, or removes one.
+    Used where a filter change adds no node to sync on, or removes one. The handler can only
+    prove the change to the publishers it knows, so first wait until it knows theirs.
     """
-    deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline:
-        events.clear()
-        burst(ros, handler, child, count=3, expected=3 * len(nodes), settle=0.3)
-        if sorted(set(events)) == sorted(nodes):
-            return
-    pytest.fail(f'events still came from {sorted(set(events))}, not {sorted(nodes)}')
+    def known():
+        return {f"{i.node_namespace.rstrip('/')}/{i.node_name}"
+                for i in ros.node.get_publishers_info_by_topic('/parameter_events')}
+    assert ros.spin_until(lambda: set(names) <= known(), timeout), \
+        f'no publisher of {set(names) - known()} discovered within {timeout} s'
+    assert handler.wait_for_filter(timeout), f'the filter change not proven within {timeout} s'
+    assert handler.parameter_event_filter_state.confirmed
 
 
 def burst(ros, handler, child, count=BURST, expected=0, settle=1.0):
@@ -116,9 +119,10 @@ def test_is_a_drop_in(ros):
     assert isinstance(handler, RclpyParameterEventHandler)
     assert is_filtered(handler.parameter_event_subscription)
     state = handler.parameter_event_filter_state
-    assert (state.mode, state.active, state.expression, state.updates) == \
-        ('nodes', True, NO_NODES, 0)
+    assert (state.mode, state.active, state.expression, state.updates, state.confirmed) == \
+        ('nodes', True, NO_NODES, 0, True)
     assert handler.get_parameter_event_filter() == (NO_NODES, [])
+    assert handler.wait_for_filter(0)  # nothing changed since the creation
     handler.destroy()
     assert handler.parameter_event_filter_state.mode == 'off'
     assert handler.get_parameter_event_filter() == ('', [])
@@ -273,7 +277,7 @@ def test_user_expression_and_event_callbacks(ros, start_nodes, prefix):
     assert 'add_parameter_event_callback' in state.reason
     assert handler.get_parameter_event_filter() == (ALL_NODES, [])
     assert child.request('matched 1', 'MATCHED') == 'MATCHED'
-    until_nodes(ros, handler, child, events, [a, b, c])
+    in_force(ros, handler, [a, b, c])
     events.clear()
     burst(ros, handler, child, expected=3 * BURST)
     assert sorted(set(events)) == [a, b, c] and len(events) == 3 * BURST
@@ -287,7 +291,7 @@ def test_user_expression_and_event_callbacks(ros, start_nodes, prefix):
     # Watching b now does not change a user filter.
     recorder.watch(b)
     assert handler.parameter_event_filter_state.updates == state.updates
-    until_nodes(ros, handler, child, events, [a, c])
+    in_force(ros, handler, [a, b, c])
     events.clear()
     burst(ros, handler, child, expected=2 * BURST)
     assert sorted(set(events)) == [a, c] and len(events) == 2 * BURST
@@ -300,6 +304,39 @@ def test_user_expression_and_event_callbacks(ros, start_nodes, prefix):
     assert (state.mode, state.active) == ('nodes', True)
     assert handler.get_parameter_event_filter() == ('node = %0 OR node = %1',
                                                     [f"'{a}'", f"'{b}'"])
+
+
+def test_a_change_is_unconfirmed_until_the_publishers_have_it(ros, start_nodes, prefix):
+    """A filter change that has not reached the publishers never looks applied.
+
+    Discovery brings a change to the publishers' process some time later; stopping that process
+    stretches the time to as long as the test needs. Until the change is proven there, the state
+    says it is unconfirmed, even in mode 'all', where the change only lets more through: the old
+    filter would still drop the events of b.
+    """
+    a, b = f'{prefix}/a', f'{prefix}/b'
+    child = start_nodes(a, b)
+    handler = ParameterEventHandler(ros.node)
+    Recorder(handler).watch(a)
+    assert child.request('matched 1', 'MATCHED') == 'MATCHED'
+    sync(ros, handler, child, [a])
+    in_force(ros, handler, [a, b])  # b's writer has 'node = %0' too: it drops b's events
+    events = []
+
+    os.kill(child.pid, signal.SIGSTOP)
+    try:
+        handler.add_parameter_event_callback(lambda e: events.append(e.node))
+        state = handler.parameter_event_filter_state
+        assert (state.mode, state.active, state.updates) == ('all', False, 2)
+        assert not state.confirmed
+        assert not handler.wait_for_filter(1.0)
+        assert not handler.parameter_event_filter_state.confirmed
+    finally:
+        os.kill(child.pid, signal.SIGCONT)
+
+    in_force(ros, handler, [a, b])
+    burst(ros, handler, child, expected=2 * BURST)
+    assert sorted(set(events)) == [a, b] and len(events) == 2 * BURST
 
 
 def test_use_sim_time_still_flips_the_clock(ros, start_nodes, prefix):

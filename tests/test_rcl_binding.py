@@ -31,3 +31,29 @@ def test_layout_check_finds_the_feedback_subscription_and_refuses_a_wrong_name(r
     missing, reason = _rcl.action_feedback_subscription(pointer, '/another_action')
     assert missing is None and 'layout check failed' in reason
     client.destroy()
+
+
+def test_layout_check_finds_the_result_client_and_takes_nothing_from_empty_queues(ros):
+    client = ActionClient(ros.node, Fibonacci, 'layout_check', feedback_filter='off')
+    pointer = client._client_handle.pointer
+    found, reason = _rcl.action_result_client(pointer, ros.node.resolve_topic_name('layout_check'))
+    assert found and reason == '' and found == client._result_client_ptr
+    missing, reason = _rcl.action_result_client(pointer, '/another_action')
+    assert missing is None and 'layout check failed' in reason
+    with client:
+        assert _rcl.take_response(found, client._result_support) == (None, None, 0)
+        assert _rcl.take_message(client._feedback_subscription_ptr,
+                                 client._feedback_support) == (None, 0)
+    client.destroy()
+
+
+def test_a_client_whose_entities_cannot_be_located_keeps_rclpy_takes(ros, monkeypatch):
+    monkeypatch.setattr(_rcl, 'action_result_client',
+                        lambda pointer, name: (None, 'layout check failed: forced by the test'))
+    client = ActionClient(ros.node, Fibonacci, 'layout_check')
+    assert client._result_client_ptr is None
+    # Without sample info there is no ordering evidence: feedback after a result is dropped.
+    client._result_stamps[b'g' * 16] = 0
+    assert client._published_after_result(b'g' * 16, 0)
+    assert not client._published_after_result(b'h' * 16, 0)
+    client.destroy()

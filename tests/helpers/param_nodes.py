@@ -50,10 +50,12 @@ def main() -> None:
     nodes = {name: make_node(name) for name in sys.argv[1:]}
     for name, node in nodes.items():
         assert node.get_fully_qualified_name() == name, (name, node.get_fully_qualified_name())
-    # The parameter client needs an executor; the nodes above need none to publish their events.
+    # The parameter client needs an executor, and so do the nodes' parameter services, which
+    # ParameterEventHandler.wait_for_filter calls; publishing their events needs none.
     client_node = Node('cft_test_param_client')
     executor = SingleThreadedExecutor()
-    executor.add_node(client_node)
+    for node in [*nodes.values(), client_node]:
+        executor.add_node(node)
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     clients: dict[str, AsyncParameterClient] = {}

@@ -1,0 +1,352 @@
+"""What filtered clients cost the action server: its achieved rate and CPU per message.
+
+For every point (feedback size x N client processes, one goal each) one guarded server runs the
+configurations one after another, plain rclpy first, through the load harness of ``make demo``
+(``demos/_harness.py``). Every figure is compared with the plain rclpy phase of the same server, as
+a ratio:
+
+- ``rate``: feedback messages the server published per second, from ``go`` until its last goal
+  finished (the rate the server's publishing threads achieved);
+- ``CPU/msg``: the server's user + system CPU seconds over the same window, per message published.
+
+Two guard modes, each with its own servers:
+
+- ``accelerated`` (the default guard): the guard answers uuid-only filters from the sample's UUID
+  bytes (``cft_action/_guard_filter.c``);
+- ``locking``: the same guard with ``CFT_GUARD_ACCELERATE=0``: only the locks, so Fast DDS
+  deserializes every sample once per filtered reader, as an unguarded server does.
+
+A phase whose goals do not finish within ``--phase-timeout`` seconds is cut there; its rate is what
+was published until then, and the rest of that point's configurations run against a fresh server.
+Results (machine, date, command, every raw figure) go to
+``benchmarks/results/server-cost-<date>-<host>.json`` after every point; ``--plot`` draws
+``docs/img/server_cost.png``. Run from the repository's root::
+
+    python -m benchmarks.server_cost --sizes 36B,1k,10k --clients 1,4,16,32
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import platform
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+from typing import Any, Optional, Sequence
+
+from demos import _harness
+
+REPO = Path(__file__).resolve().parent.parent
+#: int32 elements after the 3-element header: 36 B, 1 kB and 10 kB feedback messages.
+SIZES = {'36B': 0, '1k': 250, '10k': 2500}
+GUARD_MODES = {'accelerated': {}, 'locking': {'CFT_GUARD_ACCELERATE': '0'}}
+
+
+class CappedRun(_harness.LoadRun):
+    """A load run whose phases stop waiting for their goals after a fixed time."""
+
+    phase_timeout = 120.0
+
+    def _wait_for_goals(self, before: dict[str, Any]) -> dict[str, Any]:
+        deadline = time.monotonic() + self.phase_timeout
+        while True:
+            stats = self.server_stats()
+            if (stats['accepted'] - before['accepted'] >= self.spec.total_goals
+                    and stats['active'] == 0):
+                return {**stats, 'timed_out': False}
+            if time.monotonic() > deadline:
+                return {**stats, 'timed_out': True}
+            time.sleep(0.1)
+
+
+class ProfiledRun(CappedRun):
+    """A capped run that samples the server with ``perf record`` while the goals of a phase run."""
+
+    profile_dir = Path('.')
+
+    def window_started(self, clients: list[Any], server_stats: dict[str, Any]) -> None:
+        self.perf_data = self.profile_dir / f'perf-{len(list(self.profile_dir.glob("perf-*")))}.data'
+        self.perf = subprocess.Popen(['perf', 'record', '-F', '1999', '-g', '-p', str(self.server.pid),
+                                      '-o', str(self.perf_data)],
+                                     stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+    def window_ended(self, clients: list[Any]) -> dict[str, Any]:
+        self.perf.send_signal(signal.SIGINT)
+        self.perf.wait(timeout=60)
+        report = subprocess.run(['perf', 'report', '-i', str(self.perf_data), '--no-children',
+                                 '--sort', 'dso,symbol', '--stdio', '-g', 'none',
+                                 '--percent-limit', '1.5'],
+                                capture_output=True, text=True, timeout=300).stdout
+        by_library = subprocess.run(['perf', 'report', '-i', str(self.perf_data), '--no-children',
+                                     '--sort', 'dso', '--stdio', '-g', 'none'],
+                                    capture_output=True, text=True, timeout=300).stdout
+        return {'profile': _perf_rows(report)[:25], 'profile_by_library': _perf_rows(by_library)[:12],
+                'perf_data': str(self.perf_data)}
+
+
+def _perf_rows(report: str) -> list[str]:
+    return [' '.join(line.split()) for line in report.splitlines()
+            if line.strip() and not line.startswith('#')]
+
+
+def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
+    """Rate and CPU per message of one phase, from the server's counters at its last goal."""
+    summary = phase['summary']
+    return {
+        'config': phase['config'],
+        'published': phase['published_at_goals'],
+        'goals_s': phase['goals_s'],
+        'timed_out': phase['timed_out'],
+        'rate_msgs_per_s': summary['server_msgs_per_s'],
+        'rate_per_goal_hz': summary['achieved_rate_hz'],
+        'server_cpu_s': phase['server_cpu_goals_s'],
+        'cpu_ms_per_msg': summary['server_cpu_ms_per_msg'],
+        'own_per_client': summary['own_per_client'],
+        'foreign_per_client': summary['foreign_per_client'],
+        'guard_filter': phase.get('guard_filter', {}),
+        **{k: phase[k] for k in ('profile', 'profile_by_library') if k in phase},
+    }
+
+
+def run_point(spec: _harness.LoadSpec, configs: Sequence[str], timeout: float,
+              progress: _harness.Progress, profile_dir: Optional[Path] = None
+              ) -> list[dict[str, Any]]:
+    """Run ``configs`` under ``spec``; a fresh server after any phase that was cut."""
+    figures: list[dict[str, Any]] = []
+    pending = list(configs)
+    while pending:
+        run = CappedRun(spec, progress) if profile_dir is None else ProfiledRun(spec, progress)
+        run.phase_timeout = timeout
+        if profile_dir is not None:
+            run.profile_dir = profile_dir
+        try:
+            while pending:
+                config = pending.pop(0)
+                try:
+                    phase = run.run_phase(config)
+                except (TimeoutError, RuntimeError) as failure:  # a client or the server failed
+                    progress(f'    {config} failed: {str(failure).splitlines()[0]}')
+                    figures.append({'config': config, 'error': str(failure)[:2000]})
+                    break
+                figures.append(phase_figures(phase))
+                if phase['timed_out']:
+                    progress(f'    cut after {timeout:.0f} s: {phase["published_at_goals"]} '
+                             'published; next configuration on a fresh server')
+                    break
+        finally:
+            run.close()
+    plain = next((f for f in figures if f['config'] == 'rclpy'), None)
+    for f in figures:
+        if 'error' in f:
+            continue
+        f['ratio_to_plain'] = {
+            'rate': ratio(f['rate_msgs_per_s'], plain and plain['rate_msgs_per_s']),
+            'cpu_per_msg': ratio(f['cpu_ms_per_msg'], plain and plain['cpu_ms_per_msg']),
+        }
+    return figures
+
+
+def ratio(value: Optional[float], reference: Optional[float]) -> Optional[float]:
+    return value / reference if value is not None and reference else None
+
+
+def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
+                                     formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    parser.add_argument('--sizes', default='36B,1k,10k', help='from: ' + ', '.join(SIZES))
+    parser.add_argument('--clients', default='1,4,16,32', help='N, comma-separated')
+    parser.add_argument('--guards', default='accelerated,locking',
+                        help='guard modes, from: ' + ', '.join(GUARD_MODES))
+    parser.add_argument('--configs', default='rclpy,client,goals,upstream',
+                        help='from: ' + ', '.join(_harness.CONFIG_LABELS) + ' (rclpy first)')
+    parser.add_argument('--rate', type=float, default=100.0, help='feedback Hz per goal')
+    parser.add_argument('--duration', type=float, default=2.0,
+                        help='nominal seconds of feedback per goal')
+    parser.add_argument('--phase-timeout', type=float, default=90.0,
+                        help='seconds a phase may wait for its goals before it is cut')
+    parser.add_argument('--output', type=Path, default=None)
+    parser.add_argument('--plot', type=Path, default=None, metavar='PNG',
+                        help='also draw the rate ratios into this file')
+    parser.add_argument('--markdown', type=Path, default=None, metavar='RESULTS',
+                        help='only print the Markdown tables (and draw --plot) of a results file')
+    parser.add_argument('--profile', type=Path, default=None, metavar='DIR',
+                        help='sample the server with perf record during each phase\'s goals, '
+                             'keep perf-N.data in DIR, and add the top symbols to the results')
+    args = parser.parse_args(argv)
+    args.sizes = [s for s in args.sizes.split(',') if s]
+    args.clients = [int(n) for n in args.clients.split(',') if n]
+    args.guards = [g for g in args.guards.split(',') if g]
+    args.configs = [c for c in args.configs.split(',') if c]
+    for name, values, known in (('--sizes', args.sizes, SIZES), ('--guards', args.guards,
+                                                                  GUARD_MODES),
+                                ('--configs', args.configs, _harness.CONFIG_LABELS)):
+        unknown = set(values) - set(known)
+        if unknown:
+            parser.error(f'{name}: unknown {", ".join(sorted(unknown))}')
+    if args.configs[0] != 'rclpy':
+        parser.error('--configs must start with rclpy: every ratio refers to it')
+    return args
+
+
+def format_table(points: list[dict[str, Any]]) -> str:
+    rows = [('guard', 'size', 'N', 'configuration', 'msgs', 'goals s', 'msgs/s', 'rate x plain',
+             'CPU ms/msg', 'CPU x plain', 'uuid verdicts', 'Fast DDS verdicts')]
+    for point in points:
+        for f in point['figures']:
+            if 'error' in f:
+                rows.append((point['guard'], point['size'], str(point['clients']),
+                             _harness.CONFIG_LABELS[f['config']] + ' (failed)', *['-'] * 8))
+                continue
+            r = f['ratio_to_plain']
+            gf = f['guard_filter']
+            rows.append((point['guard'], point['size'], str(point['clients']),
+                         _harness.CONFIG_LABELS[f['config']] + (' (cut)' if f['timed_out'] else ''),
+                         str(f['published']), _fmt(f['goals_s'], '.1f'),
+                         _fmt(f['rate_msgs_per_s'], '.0f'), _fmt(r['rate'], '.2f'),
+                         _fmt(f['cpu_ms_per_msg'], '.3f'), _fmt(r['cpu_per_msg'], '.2f'),
+                         str(gf.get('uuid_verdicts', '-')), str(gf.get('fastdds_verdicts', '-'))))
+    return _harness._grid(rows)
+
+
+def markdown(points: list[dict[str, Any]]) -> str:
+    """One Markdown table per guard mode: rate and CPU per message as ratios to plain rclpy."""
+    out = []
+    for guard_mode in GUARD_MODES:
+        mine = [p for p in points if p['guard'] == guard_mode]
+        if not mine:
+            continue
+        configs = [f['config'] for f in mine[0]['figures'] if f['config'] != 'rclpy']
+        head = ['feedback', 'N', 'plain: msgs/s, CPU ms/msg']
+        head += [f'{_harness.CONFIG_LABELS[c]}: rate, CPU/msg' for c in configs]
+        out += [f'Guard {guard_mode}: ratios to plain rclpy (rate: higher is better; CPU per '
+                'message: lower is better; "cut": the goals had not finished after the phase '
+                'timeout, the rate is what was published until then)', '',
+                '| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
+        for p in mine:
+            by = {f['config']: f for f in p['figures']}
+            plain = by.get('rclpy', {})
+            row = [f"{p['size']} ({p['feedback_bytes']} B)", str(p['clients']),
+                   f"{_fmt(plain.get('rate_msgs_per_s'), '.0f')}, "
+                   f"{_fmt(plain.get('cpu_ms_per_msg'), '.3f')}"]
+            for c in configs:
+                f = by.get(c)
+                if f is None or 'error' in f:
+                    row.append('failed' if f else '-')
+                    continue
+                r = f['ratio_to_plain']
+                row.append(f"{_fmt(r['rate'], '.2f')}, {_fmt(r['cpu_per_msg'], '.2f')}"
+                           + (' (cut)' if f['timed_out'] else ''))
+            out.append('| ' + ' | '.join(row) + ' |')
+        out.append('')
+    return '\n'.join(out)
+
+
+def _fmt(value: Optional[float], spec: str) -> str:
+    return '-' if value is None else format(value, spec)
+
+
+def plot(points: list[dict[str, Any]], path: Path) -> None:
+    """Rate ratio to plain rclpy against N, one panel per guard mode and size."""
+    import matplotlib
+    matplotlib.use('Agg')
+    import matplotlib.pyplot as plt
+
+    guards = sorted({p['guard'] for p in points}, key=list(GUARD_MODES).index)
+    sizes = sorted({p['size'] for p in points}, key=list(SIZES).index)
+    fig, axes = plt.subplots(len(guards), len(sizes), figsize=(4.2 * len(sizes), 3.4 * len(guards)),
+                             squeeze=False, sharex=True)
+    for gi, guard_mode in enumerate(guards):
+        for si, size in enumerate(sizes):
+            ax = axes[gi][si]
+            mine = [p for p in points if p['guard'] == guard_mode and p['size'] == size]
+            if not mine:
+                ax.text(0.5, 0.5, 'not measured in this run', ha='center', va='center',
+                        transform=ax.transAxes)
+            configs = [f['config'] for f in mine[0]['figures']] if mine else []
+            for config in configs:
+                xs, ys = [], []
+                for p in sorted(mine, key=lambda p: p['clients']):
+                    f = next((f for f in p['figures'] if f['config'] == config), None)
+                    if f and f.get('ratio_to_plain', {}).get('rate') is not None:
+                        xs.append(p['clients'])
+                        ys.append(f['ratio_to_plain']['rate'])
+                ax.plot(xs, ys, marker='o', label=_harness.CONFIG_LABELS[config])
+            ax.axhline(0.9, color='grey', linestyle=':', linewidth=1)
+            ax.set_xscale('log', base=2)
+            ax.set_yscale('log')
+            ax.set_title(f'{size} feedback, guard {guard_mode}', fontsize=10)
+            ax.set_xlabel('client processes N (1 goal each)')
+            ax.set_ylabel('server msgs/s ÷ plain rclpy')
+            ax.grid(True, which='both', alpha=0.3)
+    axes[0][0].legend(fontsize=8)
+    fig.suptitle('Server publishing rate with filtered clients, relative to plain clients '
+                 '(dotted: 0.9)', fontsize=11)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+
+
+def main(argv: Optional[Sequence[str]] = None) -> int:
+    args = parse_args(argv)
+    if args.markdown:
+        points = json.loads(args.markdown.read_text())['points']
+        print(markdown(points))
+        if args.plot:
+            plot(points, args.plot)
+        return 0
+    started = datetime.datetime.now(datetime.timezone.utc)
+    output = args.output or (REPO / 'benchmarks' / 'results' /
+                             f'server-cost-{started.date().isoformat()}-{platform.node()}.json')
+    order = max(1, round(args.duration * args.rate))
+    result: dict[str, Any] = {
+        'benchmark': 'server_cost', 'started': started.isoformat(timespec='seconds'),
+        'command': 'python -m benchmarks.server_cost ' + ' '.join(sys.argv[1:] if argv is None
+                                                                 else argv),
+        'machine': _harness.environment_facts(), 'order': order, 'rate_hz': args.rate,
+        'points': []}
+    total = len(args.guards) * len(args.sizes) * len(args.clients)
+    t0 = time.monotonic()
+
+    def progress(line: str) -> None:
+        print(f'[{time.monotonic() - t0:6.0f} s] {line}', flush=True)
+
+    done = 0
+    for guard_mode in args.guards:
+        for size in args.sizes:
+            for n in args.clients:
+                done += 1
+                progress(f'point {done}/{total}: guard {guard_mode}, {size} feedback, N = {n}')
+                spec = _harness.LoadSpec(clients=n, goals=1, order=order, rate_hz=args.rate,
+                                         pad=SIZES[size], network='count', settle_s=2.0,
+                                         server_env=GUARD_MODES[guard_mode])
+                if args.profile:
+                    args.profile.mkdir(parents=True, exist_ok=True)
+                figures = run_point(spec, args.configs, args.phase_timeout, progress,
+                                    args.profile)
+                result['points'].append({'guard': guard_mode, 'size': size, 'clients': n,
+                                         'feedback_bytes': _harness.feedback_size(SIZES[size]),
+                                         'figures': figures})
+                output.parent.mkdir(parents=True, exist_ok=True)
+                output.write_text(json.dumps(result, indent=1))
+                print(format_table(result['points'][-1:]), flush=True)
+                for f in figures:
+                    if f.get('profile'):
+                        print(f"perf, {f['config']}:", *f['profile_by_library'], *f['profile'][:15],
+                              sep='\n  ', flush=True)
+    result['finished'] = datetime.datetime.now(datetime.timezone.utc).isoformat(timespec='seconds')
+    output.write_text(json.dumps(result, indent=1))
+    print('\n' + format_table(result['points']))
+    print('\n' + markdown(result['points']))
+    print(f'\nresults: {output}')
+    if args.plot:
+        plot(result['points'], args.plot)
+        print(f'plot: {args.plot}')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,512 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The server guard's filter verdicts: what a writer-side goal_id.uuid filter costs the server.
+//
+// Fast DDS 2.14 evaluates a writer-side DDS-SQL filter in DDSFilterExpression::evaluate by
+// deserializing the whole sample into a DynamicData, once per filtered reader and sample, so a
+// server with 16 filtered clients and 1 kB feedback publishes some 30 times slower than with plain
+// clients (docs/BENCHMARKS.md, "The server's cost"). A filter whose every term is
+// `goal_id.uuid[i] = <0..255>` has a verdict that depends only on the 16 bytes after the 4-byte
+// CDR encapsulation of an action FeedbackMessage, whose first member is goal_id. This file answers
+// such filters from those bytes, and leaves every other filter to Fast DDS.
+//
+// Where the expression comes from. Fast DDS builds a writer's filter for a reader only in
+// DataWriterImpl::process_reader_filter_info, from the ContentFilterProperty of the reader's
+// discovery data, and drops it only there (an unusable update) or in remove_reader_filter. Both are
+// interposed by _guard.c, which calls this file after the real member ran, with the writer's stripe
+// held. Whatever Fast DDS did then, a later evaluate for that (writer, reader) uses a filter built
+// from exactly that property (ReaderFilterCollection::update_entry keeps a filter only when the MD5
+// signature of class, topic, expression and parameters is unchanged), or is not called at all
+// (no filter: removed, over the writer's filter limit, data-sharing, multicast). So the program
+// compiled here from the same property gives the same verdicts.
+//
+// Soundness rules:
+// - Only an expression this grammar accepts is compiled; anything else goes to Fast DDS:
+//     expr   := atom ( AND atom )*  |  atom ( OR atom )*        (one connective per level)
+//     atom   := term  |  '(' term ( AND term )* ')'
+//     term   := goal_id.uuid[I] = V  |  goal_id.uuid[I] = goal_id.uuid[I]
+//     I      := 0..15;   V := a decimal 0..255 without a leading zero, or %N naming such a parameter
+//   Fast DDS gives AND and OR the same precedence, left to right; a level with one connective
+//   means the same under any precedence.
+// - Only for a reader of an action feedback topic (`rt/.../_action/feedback`) whose type is an
+//   action FeedbackMessage (`<pkg>::action::dds_::<Name>_FeedbackMessage_`), with filter class
+//   DDSSQL, and a sample in plain CDR (encapsulation 0x0000 or 0x0001) of at least 20 bytes.
+// - Only inside perform_create_new_change of the writer whose table entry it is, with that writer's
+//   stripe held (cft_filtering_writer), so table changes and verdicts of one writer never overlap.
+// - An entry remembers the filter instance of its first verdict; any other instance for it means
+//   a change this file did not see, and the entry is dropped.
+// - The ReaderProxyData layout is Fast DDS 2.14.5's (tests/test_guard_filter.py checks these
+//   offsets against the installed headers); every string read through it is checked for a sane
+//   length and terminator, and one failed check turns the verdicts off for the process.
+// - CFT_GUARD_VERIFY=1 asks Fast DDS too for every compiled verdict, counts disagreements and
+//   returns Fast DDS's verdict; CFT_GUARD_ACCELERATE=0 turns this file off.
+
+#define _GNU_SOURCE
+#include <pthread.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "_guard.h"
+
+__thread const void *cft_filtering_writer;
+
+// ---- Fast DDS 2.14.5 layouts (x86_64, libstdc++) -------------------------------------------------
+#define RPD_TYPE_NAME 1216          // ReaderProxyData::m_typeName (string_255)
+#define RPD_CONTENT_FILTER 1824     // ReaderProxyData::content_filter_ (ContentFilterProperty)
+#define CFP_RELATED_TOPIC 264       // ContentFilterProperty::related_topic_name (string_255)
+#define CFP_CLASS_NAME 528          // ContentFilterProperty::filter_class_name (string_255)
+#define CFP_EXPRESSION 792          // ContentFilterProperty::filter_expression (std::string)
+#define CFP_PARAMETERS 824          // ContentFilterProperty::expression_parameters
+#define RLV_VECTOR 32               // ResourceLimitedVector: vtable, 3 x size_t, then std::vector
+#define STRING255_SIZE 264          // fixed_string<255>: char[256], then size_t length
+#define STRING255_LENGTH 256
+#define PAYLOAD_LENGTH 4            // SerializedPayload_t::length (uint32_t)
+#define PAYLOAD_DATA 8              // SerializedPayload_t::data (octet*)
+#define MAX_PARAMETERS 100
+#define MAX_EXPRESSION 65536        // an RTPS parameter cannot carry more
+
+// Exported for the layout test: {which} -> the constant above.
+CFT_EXPORT long cft_guard_filter_layout(int which) {
+  static const long layout[] = {RPD_TYPE_NAME, RPD_CONTENT_FILTER, CFP_RELATED_TOPIC,
+                                CFP_CLASS_NAME, CFP_EXPRESSION, CFP_PARAMETERS, RLV_VECTOR,
+                                STRING255_SIZE, STRING255_LENGTH, PAYLOAD_LENGTH, PAYLOAD_DATA};
+  return which >= 0 && which < (int)(sizeof layout / sizeof layout[0]) ? layout[which] : -1;
+}
+
+// ---- counters (cft_guard_filter_count) -----------------------------------------------------------
+enum {
+  C_FAST,          // verdicts given from the uuid bytes
+  C_REAL,          // verdicts left to Fast DDS's evaluate
+  C_COMPILED,      // reader filters compiled to a uuid program
+  C_NOT_COMPILED,  // reader filters left to Fast DDS (not uuid-only, or not a feedback reader)
+  C_DROPPED,       // entries dropped: reader removed, or a change seen without the stripe
+  C_EVICTED,       // entries evicted from a full table (their verdicts go back to Fast DDS)
+  C_FOREIGN,       // entries dropped because a verdict came for another filter instance
+  C_VERIFIED,      // verdicts compared with Fast DDS's (CFT_GUARD_VERIFY=1)
+  C_MISMATCH,      // of those, disagreements (always 0, or this file is wrong)
+  C_COUNT
+};
+static unsigned long counters[C_COUNT];
+static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_RELAXED); }
+
+CFT_EXPORT unsigned long cft_guard_filter_count(int which) {
+  return which >= 0 && which < C_COUNT ? __atomic_load_n(&counters[which], __ATOMIC_RELAXED) : 0;
+}
+
+// ---- the program ---------------------------------------------------------------------------------
+// One clause is a conjunction of byte equalities: it matches when (uuid & mask) == value.
+struct clause {
+  uint8_t mask[16];
+  uint8_t value[16];
+};
+struct program {
+  int count;   // clauses that can match; 0 matches nothing
+  struct clause clauses[];
+};
+
+static bool program_matches(const struct program *p, const uint8_t *uuid) {
+  uint64_t u0, u1;
+  memcpy(&u0, uuid, 8);
+  memcpy(&u1, uuid + 8, 8);
+  for (int i = 0; i < p->count; i++) {
+    uint64_t m0, m1, v0, v1;
+    memcpy(&m0, p->clauses[i].mask, 8);
+    memcpy(&m1, p->clauses[i].mask + 8, 8);
+    memcpy(&v0, p->clauses[i].value, 8);
+    memcpy(&v1, p->clauses[i].value + 8, 8);
+    if ((u0 & m0) == v0 && (u1 & m1) == v1) return true;
+  }
+  return false;
+}
+
+// ---- the parser ----------------------------------------------------------------------------------
+struct parser {
+  const char *at;
+  const char *const *params;
+  int param_count;
+};
+
+static void skip_space(struct parser *ps) {
+  while (*ps->at == ' ' || *ps->at == '\t' || *ps->at == '\n' || *ps->at == '\r') ps->at++;
+}
+
+static bool is_word_char(char c) {
+  return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' ||
+         c == '.';
+}
+
+// A decimal 0..255 without a leading zero (Fast DDS reads 010 as octal), ending at a non-word
+// character. Advances *s past it.
+static bool byte_literal(const char **s, int *out) {
+  const char *p = *s;
+  if (*p < '0' || *p > '9') return false;
+  if (*p == '0' && p[1] >= '0' && p[1] <= '9') return false;
+  int v = 0;
+  while (*p >= '0' && *p <= '9') {
+    v = v * 10 + (*p - '0');
+    if (v > 255) return false;
+    p++;
+  }
+  if (is_word_char(*p)) return false;  // 1.5, 1e3, 12abc, 0x1f
+  *out = v;
+  *s = p;
+  return true;
+}
+
+static bool keyword(struct parser *ps, const char *word) {
+  size_t n = strlen(word);
+  if (strncmp(ps->at, word, n) != 0 || is_word_char(ps->at[n])) return false;
+  ps->at += n;
+  return true;
+}
+
+// `goal_id.uuid[I]`; sets *index.
+static bool uuid_field(struct parser *ps, int *index) {
+  static const char field[] = "goal_id.uuid[";
+  if (strncmp(ps->at, field, sizeof field - 1) != 0) return false;
+  const char *p = ps->at + sizeof field - 1;
+  int i;
+  if (!byte_literal(&p, &i) || *p != ']' || i > 15) return false;
+  ps->at = p + 1;
+  *index = i;
+  return true;
+}
+
+// One term, ANDed into *c; sets *never when the clause became a contradiction.
+static bool term(struct parser *ps, struct clause *c, bool *never) {
+  int index, value;
+  skip_space(ps);
+  if (!uuid_field(ps, &index)) return false;
+  skip_space(ps);
+  if (*ps->at != '=' || ps->at[1] == '=') return false;
+  ps->at++;
+  skip_space(ps);
+  int other;
+  if (uuid_field(ps, &other)) {
+    return other == index;  // a field equals itself: no constraint; two fields: not handled here
+  }
+  if (*ps->at == '%') {
+    const char *p = ps->at + 1;
+    int n;
+    if (!byte_literal(&p, &n) || n >= ps->param_count) return false;  // %0..%99 are below 256
+    const char *param = ps->params[n];
+    if (!byte_literal(&param, &value) || *param != '\0') return false;
+    ps->at = p;
+  } else if (!byte_literal(&ps->at, &value)) {
+    return false;
+  }
+  if (c->mask[index] != 0 && c->value[index] != (uint8_t)value) *never = true;
+  c->mask[index] = 0xff;
+  c->value[index] = (uint8_t)value;
+  return true;
+}
+
+// An atom: a term, or a parenthesized conjunction of terms. ANDs into *c.
+static bool atom(struct parser *ps, struct clause *c, bool *never) {
+  skip_space(ps);
+  if (*ps->at != '(') return term(ps, c, never);
+  ps->at++;
+  if (!term(ps, c, never)) return false;
+  for (;;) {
+    skip_space(ps);
+    if (*ps->at == ')') { ps->at++; return true; }
+    if (!keyword(ps, "AND")) return false;
+    if (!term(ps, c, never)) return false;
+  }
+}
+
+// Compiles `expression` with `params`, or returns NULL when it is not uuid-only in this grammar.
+static struct program *compile(const char *expression, const char *const *params, int param_count) {
+  struct parser ps = {expression, params, param_count};
+  int capacity = 8;
+  struct program *p = calloc(1, sizeof *p + (size_t)capacity * sizeof p->clauses[0]);
+  if (p == NULL) return NULL;
+  struct clause current;
+  memset(&current, 0, sizeof current);
+  bool never = false;
+  enum { NONE, ALL_AND, ALL_OR } connective = NONE;
+  if (!atom(&ps, &current, &never)) goto unsupported;
+  for (;;) {
+    skip_space(&ps);
+    if (*ps.at == '\0') break;
+    if (connective != ALL_OR && keyword(&ps, "AND")) {
+      connective = ALL_AND;
+      if (!atom(&ps, &current, &never)) goto unsupported;
+      continue;
+    }
+    if (connective != ALL_AND && keyword(&ps, "OR")) {
+      connective = ALL_OR;
+      if (!never) {
+        if (p->count == capacity) {
+          capacity *= 2;
+          struct program *grown = realloc(p, sizeof *p + (size_t)capacity * sizeof p->clauses[0]);
+          if (grown == NULL) goto unsupported;
+          p = grown;
+        }
+        p->clauses[p->count++] = current;
+      }
+      memset(&current, 0, sizeof current);
+      never = false;
+      if (!atom(&ps, &current, &never)) goto unsupported;
+      continue;
+    }
+    goto unsupported;  // another token, or a second kind of connective on this level
+  }
+  if (!never) {
+    if (p->count == capacity) {
+      struct program *grown = realloc(p, sizeof *p + (size_t)(capacity + 1) * sizeof p->clauses[0]);
+      if (grown == NULL) goto unsupported;
+      p = grown;
+    }
+    p->clauses[p->count++] = current;
+  }
+  return p;
+unsupported:
+  free(p);
+  return NULL;
+}
+
+// Exported for the grammar test: 1 if `expression` compiles and `uuid` matches, 0 if it compiles
+// and does not, -1 if it is not compiled (Fast DDS would be asked).
+CFT_EXPORT int cft_guard_filter_try(const char *expression, const char *const *params,
+                                    int param_count, const uint8_t *uuid) {
+  struct program *p = compile(expression, params, param_count);
+  if (p == NULL) return -1;
+  int verdict = program_matches(p, uuid);
+  free(p);
+  return verdict;
+}
+
+// ---- reading the reader's discovery data -----------------------------------------------------------
+static bool layout_failed;  // set once, read without a lock: verdicts then all go to Fast DDS
+
+static void layout_suspect(const char *what) {
+  if (!__atomic_exchange_n(&layout_failed, true, __ATOMIC_RELAXED))
+    cft_say("filter verdicts off: the reader discovery data does not look like Fast DDS 2.14.5's "
+            "(%s); every filter goes to Fast DDS", what);
+}
+
+// A fixed_string<255>, or NULL when its length and terminator disagree.
+static const char *string255(const uint8_t *at) {
+  size_t length;
+  memcpy(&length, at + STRING255_LENGTH, sizeof length);
+  if (length > 255 || at[length] != '\0' || memchr(at, '\0', length) != NULL) return NULL;
+  return (const char *)at;
+}
+
+static bool ends_with(const char *s, const char *tail) {
+  size_t n = strlen(s), m = strlen(tail);
+  return n >= m && strcmp(s + n - m, tail) == 0;
+}
+
+// rosidl's DDS name of an action feedback message: <pkg>::action::dds_::<Name>_FeedbackMessage_.
+static bool is_feedback_type(const char *type) {
+  const char *ns = strstr(type, "::action::dds_::");
+  return ns != NULL && ns != type && strchr(ns + 16, ':') == NULL &&
+         ends_with(type, "_FeedbackMessage_");
+}
+
+// The reader's uuid program, or NULL when it has no filter (*filtered false) or one this file
+// does not answer.
+static struct program *program_of(const uint8_t *info, bool *filtered) {
+  const uint8_t *cfp = info + RPD_CONTENT_FILTER;
+  const char *type = string255(info + RPD_TYPE_NAME);
+  const char *related = string255(cfp + CFP_RELATED_TOPIC);
+  const char *class_name = string255(cfp + CFP_CLASS_NAME);
+  if (type == NULL || related == NULL || class_name == NULL) {
+    layout_suspect("a topic, type or filter class name");
+    return NULL;
+  }
+  *filtered = class_name[0] != '\0';
+  if (!*filtered) return NULL;
+  const char *expression;
+  size_t length;
+  memcpy(&expression, cfp + CFP_EXPRESSION, sizeof expression);
+  memcpy(&length, cfp + CFP_EXPRESSION + sizeof expression, sizeof length);
+  if (expression == NULL || length >= MAX_EXPRESSION || expression[length] != '\0' ||
+      memchr(expression, '\0', length) != NULL) {
+    layout_suspect("the filter expression");
+    return NULL;
+  }
+  const uint8_t *begin, *end;
+  memcpy(&begin, cfp + CFP_PARAMETERS + RLV_VECTOR, sizeof begin);
+  memcpy(&end, cfp + CFP_PARAMETERS + RLV_VECTOR + sizeof begin, sizeof end);
+  if (end < begin || (size_t)(end - begin) % STRING255_SIZE != 0 ||
+      (size_t)(end - begin) / STRING255_SIZE > MAX_PARAMETERS) {
+    layout_suspect("the expression parameters");
+    return NULL;
+  }
+  int param_count = (int)((size_t)(end - begin) / STRING255_SIZE);
+  const char *params[MAX_PARAMETERS];
+  for (int i = 0; i < param_count; i++) {
+    params[i] = string255(begin + (size_t)i * STRING255_SIZE);
+    if (params[i] == NULL) {
+      layout_suspect("an expression parameter");
+      return NULL;
+    }
+  }
+  struct program *program = NULL;
+  if (strcmp(class_name, "DDSSQL") == 0 && strncmp(related, "rt/", 3) == 0 &&
+      ends_with(related, "/_action/feedback") && is_feedback_type(type))
+    program = compile(expression, params, param_count);
+  if (cft_debug_enabled())
+    cft_say("reader filter on %s (%s, %s): %s: %.200s", related, type, class_name,
+            program ? "uuid verdicts" : "left to Fast DDS", expression);
+  return program;
+}
+
+// ---- the table: (writer, reader GUID) -> program ---------------------------------------------------
+// Open addressing with a bounded probe. A missing entry is always safe (Fast DDS decides), so a
+// full neighbourhood evicts. Verdicts hold table_lock while they use a program, so an eviction by
+// another writer never frees a program in use.
+#define TABLE_SLOTS 4096
+#define PROBE 16
+struct entry {
+  const void *writer;      // NULL: free
+  uint8_t reader[16];
+  const void *instance;    // the filter instance of the first verdict, NULL before it
+  struct program *program;
+};
+static struct entry table[TABLE_SLOTS];
+static pthread_mutex_t table_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static unsigned slot_of(const void *writer, const uint8_t *reader) {
+  uint64_t h = (uint64_t)(uintptr_t)writer * 0x9E3779B97F4A7C15ull;
+  uint64_t r0, r1;
+  memcpy(&r0, reader, 8);
+  memcpy(&r1, reader + 8, 8);
+  h ^= (r0 * 0xC2B2AE3D27D4EB4Full) ^ (r1 * 0x165667B19E3779F9ull);
+  h ^= h >> 29;
+  return (unsigned)(h % TABLE_SLOTS);
+}
+
+static struct entry *find_locked(const void *writer, const uint8_t *reader) {
+  unsigned home = slot_of(writer, reader);
+  for (unsigned i = 0; i < PROBE; i++) {
+    struct entry *e = &table[(home + i) % TABLE_SLOTS];
+    if (e->writer == writer && memcmp(e->reader, reader, 16) == 0) return e;
+  }
+  return NULL;
+}
+
+static void clear_locked(struct entry *e) {
+  free(e->program);
+  memset(e, 0, sizeof *e);
+}
+
+// Entries are never moved, so a free slot inside a probe window does not end a search: lookups
+// always look at the whole window.
+static void store_locked(const void *writer, const uint8_t *reader, struct program *program) {
+  struct entry *e = find_locked(writer, reader);
+  if (e == NULL) {
+    unsigned home = slot_of(writer, reader);
+    for (unsigned i = 0; i < PROBE && e == NULL; i++)
+      if (table[(home + i) % TABLE_SLOTS].writer == NULL) e = &table[(home + i) % TABLE_SLOTS];
+    if (e == NULL) {
+      e = &table[home];
+      count(C_EVICTED);
+    }
+  }
+  clear_locked(e);
+  e->writer = writer;
+  memcpy(e->reader, reader, 16);
+  e->program = program;
+}
+
+static void drop(const void *writer, const void *reader_guid, int why) {
+  if (reader_guid == NULL) return;
+  pthread_mutex_lock(&table_lock);
+  struct entry *e = find_locked(writer, reader_guid);
+  if (e != NULL) {
+    clear_locked(e);
+    count(why);
+  }
+  pthread_mutex_unlock(&table_lock);
+}
+
+// ---- the hooks -------------------------------------------------------------------------------------
+static cft_evaluate_fn real_evaluate;  // set once, before the family turns active
+static bool enabled, verify;
+
+void cft_filter_enable(cft_evaluate_fn real) {
+  const char *off = getenv("CFT_GUARD_ACCELERATE");
+  const char *check = getenv("CFT_GUARD_VERIFY");
+  real_evaluate = real;
+  verify = check != NULL && check[0] != '\0' && strcmp(check, "0") != 0;
+  enabled = !(off != NULL && strcmp(off, "0") == 0);
+  if (cft_debug_enabled())
+    cft_say("uuid filter verdicts %s%s", enabled ? "on" : "off (CFT_GUARD_ACCELERATE=0)",
+            verify ? ", each checked against Fast DDS (CFT_GUARD_VERIFY)" : "");
+}
+
+void cft_filter_reader_changed(const void *writer, const void *reader_guid, const void *reader_info) {
+  if (!enabled || reader_guid == NULL) return;
+  bool filtered = reader_info != NULL;
+  struct program *program = reader_info != NULL && !__atomic_load_n(&layout_failed, __ATOMIC_RELAXED)
+                                ? program_of(reader_info, &filtered) : NULL;
+  if (program == NULL) {
+    if (filtered) count(C_NOT_COMPILED);
+    drop(writer, reader_guid, C_DROPPED);
+    return;
+  }
+  count(C_COMPILED);
+  pthread_mutex_lock(&table_lock);
+  store_locked(writer, reader_guid, program);
+  pthread_mutex_unlock(&table_lock);
+}
+
+void cft_filter_reader_removed(const void *writer, const void *reader_guid) {
+  if (enabled) drop(writer, reader_guid, C_DROPPED);
+}
+
+void cft_filter_reader_unknown(const void *writer, const void *reader_guid) {
+  if (enabled) drop(writer, reader_guid, C_DROPPED);
+}
+
+// 1 or 0 from the uuid program, -1 when there is none for this verdict.
+static int uuid_verdict(const void *self, const void *payload, const void *reader_guid) {
+  const void *writer = cft_filtering_writer;
+  if (writer == NULL || reader_guid == NULL || __atomic_load_n(&layout_failed, __ATOMIC_RELAXED))
+    return -1;
+  const uint8_t *p = payload;
+  uint32_t length;
+  const uint8_t *data;
+  memcpy(&length, p + PAYLOAD_LENGTH, sizeof length);
+  memcpy(&data, p + PAYLOAD_DATA, sizeof data);
+  // Plain CDR, big or little endian; a uint8[16] at offset 0 of the body has no padding.
+  if (data == NULL || length < 20 || data[0] != 0 || data[1] > 1) return -1;
+  int verdict = -1;
+  pthread_mutex_lock(&table_lock);
+  struct entry *e = find_locked(writer, reader_guid);
+  if (e != NULL) {
+    if (e->instance == NULL) e->instance = self;
+    if (e->instance == self) {
+      verdict = program_matches(e->program, data + 4);
+    } else {
+      clear_locked(e);
+      count(C_FOREIGN);
+    }
+  }
+  pthread_mutex_unlock(&table_lock);
+  return verdict;
+}
+
+bool cft_filter_evaluate(const void *self, const void *payload, const void *sample_info,
+                         const void *reader_guid) {
+  int verdict = enabled ? uuid_verdict(self, payload, reader_guid) : -1;
+  if (verdict < 0) {
+    count(C_REAL);
+    return real_evaluate(self, payload, sample_info, reader_guid);
+  }
+  if (verify) {
+    bool theirs = real_evaluate(self, payload, sample_info, reader_guid);
+    count(C_VERIFIED);
+    if (theirs != (verdict == 1)) {
+      count(C_MISMATCH);
+      cft_say("uuid filter verdict %d disagrees with Fast DDS's %d", verdict, (int)theirs);
+      return theirs;
+    }
+  }
+  count(C_FAST);
+  return verdict == 1;
+}
