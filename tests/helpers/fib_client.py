@@ -95,9 +95,14 @@ def main() -> None:
     state = getattr(client, 'feedback_filter_state', None)
     print('RESULT ' + json.dumps({
         'complete_goals': sum(ks == list(range(order)) for ks in received.values()),
+        # goals that got every message but the first, which the server publishes at once
+        'lost_only_the_first': sum(ks == list(range(1, order)) for ks in received.values()),
         'own_received': sum(len(ks) for ks in received.values()),
         'misrouted': misrouted,
         'results': sum(r.done() for r in results),
+        # goal index (in sending order) -> the feedback it got, for the first incomplete goals
+        'incomplete': repr({i: ks for i, ks in enumerate(received.values())
+                            if ks != list(range(order))})[:400],
         **({'taken': state.feedback_taken, 'dropped': state.feedback_dropped,
             'active': state.active, 'reason': state.reason, 'updates': state.updates}
            if state else {}),
