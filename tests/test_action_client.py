@@ -7,7 +7,6 @@ import uuid
 
 import pytest
 from action_msgs.msg import GoalStatus
-from rclpy.action import ActionClient as RclpyActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.qos import QoSProfile
 from rclpy.task import Future
@@ -166,39 +165,37 @@ def result_of(ros, goal_handle):
 def test_feedback_published_before_the_result_but_taken_after_it_is_delivered(ros, mode):
     """Feedback, status and result travel on different topics, and rclpy takes one sample of each
     per wake: feedback still queued when the result is taken comes after it. Plain rclpy drops it,
-    since it forgets the callback when the result arrives; this client delivers it, because the
-    server stamped it before the result (tests/test_rclpy_contract.py has the converse)."""
+    since it forgets the callback when the result arrives (measured by
+    benchmarks/first_feedback.py, README "Differences from rclpy"; whether a plain client here
+    has the result queued before its first wake depends on timing, so it is not asserted); this
+    client delivers it, because the server stamped it before the result
+    (tests/test_rclpy_contract.py has the converse)."""
     action = '/' + unique_name('fib')
     order = 5
     # 0.5 s apart, so that the goal is accepted long before its last feedback is published.
     child = start_server(action, period=0.5)
     try:
-        clients = {'cft': make_client(ros, action, feedback_filter=mode),
-                   'rclpy': RclpyActionClient(ros.node, Fibonacci, action)}
-        assert clients['rclpy'].wait_for_server(timeout_sec=20)
-        assert round_trip(ros, clients['rclpy'])
-        received = {name: [] for name in clients}  # (k, whether the result was in by then)
-        for name, client in clients.items():
-            result = Future()
-            handle = send(ros, client, order, feedback_callback=lambda m, name=name: received[
-                name].append((m.feedback.sequence[0], result.done())))
-            result = handle.get_result_async()
-            # Not spinning: the goal's feedback and its result queue up in the client.
-            deadline = time.monotonic() + 20
-            while child.request_json('stats', 'STATS')['active'] and time.monotonic() < deadline:
-                time.sleep(0.05)
-            time.sleep(0.5)  # the result is sent once the executor has run the goal's end
-            assert ros.spin_until(result.done, 20)
-            assert result.result().status == GoalStatus.STATUS_SUCCEEDED
-        ros.spin_until(lambda: len(received['cft']) == order, 5)
+        client = make_client(ros, action, feedback_filter=mode)
+        received = []  # (k, whether the result was in by then)
+        result = Future()
+        handle = send(ros, client, order, feedback_callback=lambda m: received.append(
+            (m.feedback.sequence[0], result.done())))
+        result = handle.get_result_async()
+        # Not spinning: the goal's feedback and its result queue up in the client.
+        deadline = time.monotonic() + 20
+        while child.request_json('stats', 'STATS')['active'] and time.monotonic() < deadline:
+            time.sleep(0.05)
+        time.sleep(0.5)  # the result is sent once the executor has run the goal's end
+        assert ros.spin_until(result.done, 20)
+        assert result.result().status == GoalStatus.STATUS_SUCCEEDED
+        ros.spin_until(lambda: len(received) == order, 5)
         ros.spin_for(0.3)
     finally:
         child.stop()
-    assert [k for k, _ in received['cft']] == list(range(order))
-    assert any(after for _, after in received['cft']), 'nothing was queued behind the result'
-    state = clients['cft'].feedback_filter_state  # in 'off' mode it takes the other's too
+    assert [k for k, _ in received] == list(range(order))
+    assert any(after for _, after in received), 'nothing was queued behind the result'
+    state = client.feedback_filter_state
     assert state.feedback_taken - state.feedback_dropped == order
-    assert len(received['rclpy']) < order, 'plain rclpy delivered feedback taken after the result'
 
 
 def test_default_mode_is_client_with_a_tag_and_a_fixed_filter(ros, server):
