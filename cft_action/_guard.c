@@ -370,7 +370,7 @@ static void restore_filtering_writer(const void **saved) { cft_filtering_writer 
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
     real(self, guid, info);                                                                     \
     if (FILTERS && scoped_lock_ != NULL) cft_filter_reader_changed(self, guid, info);           \
-    else if (FILTERS) cft_filter_reader_unknown(self, guid);                                    \
+    else if (FILTERS) cft_filter_reader_dropped(self, guid);                                    \
   }                                                                                             \
   void cft_rrf##SUFFIX(void *self, const void *guid) {                                          \
     struct family *f = ready(FAM);                                                              \
@@ -380,7 +380,7 @@ static void restore_filtering_writer(const void **saved) { cft_filtering_writer 
     if (f->state != CFT_GUARD_ACTIVE) { real(self, guid); return; }                             \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
     real(self, guid);                                                                           \
-    if (FILTERS) cft_filter_reader_removed(self, guid);                                         \
+    if (FILTERS) cft_filter_reader_dropped(self, guid);                                         \
   }
 
 DEFINE_WRAPPERS(2, 0, 1, PCNC2, PRFI2, RRF2)

@@ -20,9 +20,8 @@ extern __thread const void *cft_filtering_writer;
 
 // Fast DDS 2.14 calls, made by _guard.c with the writer's stripe held, after the real member ran.
 void cft_filter_reader_changed(const void *writer, const void *reader_guid, const void *reader_info);
-void cft_filter_reader_removed(const void *writer, const void *reader_guid);
-// The same calls when the stripe could not be held: the reader's accelerated verdicts are dropped.
-void cft_filter_reader_unknown(const void *writer, const void *reader_guid);
+// The reader went away, or changed while the stripe could not be held: its verdicts go to Fast DDS.
+void cft_filter_reader_dropped(const void *writer, const void *reader_guid);
 
 // Set by _guard.c once it resolved the real DDSFilterExpression::evaluate of the known Fast DDS.
 typedef bool (*cft_evaluate_fn)(const void *self, const void *payload, const void *sample_info,

@@ -215,6 +215,18 @@ static bool atom(struct parser *ps, struct clause *c, bool *never) {
   }
 }
 
+// Appends `c` to *p, growing it; false when out of memory (*p is then still valid).
+static bool append_clause(struct program **p, int *capacity, const struct clause *c) {
+  if ((*p)->count == *capacity) {
+    struct program *grown = realloc(*p, sizeof **p + (size_t)(*capacity * 2) * sizeof c[0]);
+    if (grown == NULL) return false;
+    *p = grown;
+    *capacity *= 2;
+  }
+  (*p)->clauses[(*p)->count++] = *c;
+  return true;
+}
+
 // Compiles `expression` with `params`, or returns NULL when it is not uuid-only in this grammar.
 static struct program *compile(const char *expression, const char *const *params, int param_count) {
   struct parser ps = {expression, params, param_count};
@@ -236,15 +248,7 @@ static struct program *compile(const char *expression, const char *const *params
     }
     if (connective != ALL_AND && keyword(&ps, "OR")) {
       connective = ALL_OR;
-      if (!never) {
-        if (p->count == capacity) {
-          capacity *= 2;
-          struct program *grown = realloc(p, sizeof *p + (size_t)capacity * sizeof p->clauses[0]);
-          if (grown == NULL) goto unsupported;
-          p = grown;
-        }
-        p->clauses[p->count++] = current;
-      }
+      if (!never && !append_clause(&p, &capacity, &current)) goto unsupported;
       memset(&current, 0, sizeof current);
       never = false;
       if (!atom(&ps, &current, &never)) goto unsupported;
@@ -252,14 +256,7 @@ static struct program *compile(const char *expression, const char *const *params
     }
     goto unsupported;  // another token, or a second kind of connective on this level
   }
-  if (!never) {
-    if (p->count == capacity) {
-      struct program *grown = realloc(p, sizeof *p + (size_t)(capacity + 1) * sizeof p->clauses[0]);
-      if (grown == NULL) goto unsupported;
-      p = grown;
-    }
-    p->clauses[p->count++] = current;
-  }
+  if (!never && !append_clause(&p, &capacity, &current)) goto unsupported;
   return p;
 unsupported:
   free(p);
@@ -455,11 +452,7 @@ void cft_filter_reader_changed(const void *writer, const void *reader_guid, cons
   pthread_mutex_unlock(&table_lock);
 }
 
-void cft_filter_reader_removed(const void *writer, const void *reader_guid) {
-  if (enabled) drop(writer, reader_guid, C_DROPPED);
-}
-
-void cft_filter_reader_unknown(const void *writer, const void *reader_guid) {
+void cft_filter_reader_dropped(const void *writer, const void *reader_guid) {
   if (enabled) drop(writer, reader_guid, C_DROPPED);
 }
 
