@@ -22,12 +22,15 @@ import time
 from typing import Any, Callable, NamedTuple, Optional
 
 from action_msgs.msg import GoalStatus
+from action_msgs.srv import CancelGoal
 from rclpy.action import ActionClient as _RclpyActionClient
 from rclpy.node import Node
+from rclpy.qos import qos_profile_services_default
 from rclpy.task import Future
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import _rcl
+from cft_action.arrival import participant_of, ServiceProbe
 from cft_action.errors import InvalidArgumentError
 from cft_action.filters import MATCH_ALL
 from cft_action.goal_filter import ExpressionTooLong, GoalFilterPlan, MODES, random_uuid4
@@ -55,6 +58,15 @@ FINISHED_GOAL_GRACE = 10.0
 #: finished) after which ``goals`` mode drops the terms of released goals from its filter.
 RELEASE_CHECK_PERIOD = 1.0
 
+#: Seconds a goal request is held for the proof that the server's feedback writer has the filter
+#: update that matches the goal. The proof is a reply of the server's cancel service, so a server
+#: that answers nothing for this long would not answer the goal either; the goal is then sent
+#: anyway, as rclpy sends it, and its first feedback may be lost.
+FILTER_ARRIVAL_TIMEOUT = 5.0
+
+#: Seconds between polls of the arrival probe while goal requests are held.
+ARRIVAL_POLL_PERIOD = 0.01
+
 
 class FeedbackFilterState(NamedTuple):
     """A snapshot of an :class:`ActionClient`'s feedback filter.
@@ -69,6 +81,11 @@ class FeedbackFilterState(NamedTuple):
     :ivar feedback_taken: feedback messages taken from rcl by this client.
     :ivar feedback_dropped: of those, messages not given to a callback: there was none for their
         goal, or the server published them after the goal's result.
+    :ivar confirmed: whether the server's feedback writer is known to apply every term that a goal
+        sent so far needs. A goal whose term came with an update is held until it is.
+    :ivar held_goals: goal requests that were held for that proof, since construction.
+    :ivar arrival_timeouts: times the proof did not come within ``FILTER_ARRIVAL_TIMEOUT`` and the
+        held goals were sent without it.
     """
 
     mode: str
@@ -79,6 +96,35 @@ class FeedbackFilterState(NamedTuple):
     live_goals: int
     feedback_taken: int
     feedback_dropped: int
+    confirmed: bool = True
+    held_goals: int = 0
+    arrival_timeouts: int = 0
+
+
+class _HeldGoal(NamedTuple):
+    """A goal request held until the filter term it needs has reached the server."""
+
+    revision: int  # the filter revision it needs; 0: none, it only keeps its place in the order
+    goal: Any
+    feedback_callback: Optional[Callable]
+    goal_uuid: UUID
+    future: Future
+
+
+def _forward(source: Future, target: Future) -> None:
+    """Complete ``target`` as ``source`` completes, and cancel ``source`` with ``target``."""
+    def done(_: Future) -> None:
+        if target.done():
+            return
+        if source.cancelled():
+            target.cancel()
+        elif source.exception() is not None:
+            target.set_exception(source.exception())
+        else:
+            target.set_result(source.result())
+
+    target.add_done_callback(lambda _: source.cancel() if target.cancelled() else None)
+    source.add_done_callback(done)
 
 
 def _resolve_mode(feedback_filter: Optional[str]) -> str:
@@ -142,10 +188,24 @@ class ActionClient(_RclpyActionClient):
         self._result_client_ptr: Optional[int] = None
         self._feedback_support: Optional[_rcl.MessageSupport] = None
         self._result_support: Optional[_rcl.MessageSupport] = None
+        self._resolved_action_name = ''
+        # The proof of arrival of filter updates at the server (cft_action.arrival).
+        self._confirmed_revision = 1  # the initial filter arrives with the reader itself
+        self._held: list[_HeldGoal] = []
+        self._arrival_probe: Optional[ServiceProbe] = None
+        self._probe_revision = 0
+        self._probe_started_at = 0.0
+        self._own_participant: Optional[bytes] = None
+        self._held_goals = 0
+        self._arrival_timeouts = 0
+        self._cancel_qos = kwargs.get('cancel_service_qos_profile', qos_profile_services_default)
         self._install_before_first_wait(node, action_type, action_name, kwargs)
         self._release_timer = node.create_timer(
             RELEASE_CHECK_PERIOD, self._release_finished_goals, callback_group=self.callback_group)
         self._release_timer.cancel()
+        self._arrival_timer = node.create_timer(
+            ARRIVAL_POLL_PERIOD, self._poll_arrival, callback_group=self.callback_group)
+        self._arrival_timer.cancel()
 
     # --- installation -----------------------------------------------------------------------------
 
@@ -163,8 +223,8 @@ class ActionClient(_RclpyActionClient):
 
         def install_then_add(waitable) -> None:
             if waitable is self:
-                resolved_action_name = node.resolve_topic_name(action_name)
-                self._locate_entities(resolved_action_name)
+                self._resolved_action_name = node.resolve_topic_name(action_name)
+                self._locate_entities(self._resolved_action_name)
                 self._install_filter()
             add_waitable(waitable)
 
@@ -260,7 +320,9 @@ class ActionClient(_RclpyActionClient):
         with self._filter_lock:
             return self._state._replace(
                 live_goals=self._plan.live_goals if self._plan else 0,
-                feedback_taken=self._feedback_taken, feedback_dropped=self._feedback_dropped)
+                feedback_taken=self._feedback_taken, feedback_dropped=self._feedback_dropped,
+                confirmed=self._plan is None or self._needed_revision() <= self._confirmed_revision,
+                held_goals=self._held_goals, arrival_timeouts=self._arrival_timeouts)
 
     def new_goal_uuid(self) -> UUID:
         """
@@ -284,7 +346,11 @@ class ActionClient(_RclpyActionClient):
         The result of the returned Future is set to a ClientGoalHandle when receipt of the goal
         is acknowledged by an action server.
 
-        When the filter must grow to match this goal, it grows before the request is sent.
+        When the filter must grow to match this goal, it grows before the request is sent, and
+        the request is held until the server's cancel service, asked from a client created after
+        the growth, has replied: discovery is ordered, so the feedback writer then has the new
+        filter, and the feedback that the server publishes at once is not filtered out. Requests
+        are sent in the order of the calls.
 
         :param goal: The goal request.
         :type goal: action_type.Goal
@@ -313,12 +379,106 @@ class ActionClient(_RclpyActionClient):
                     goal_uuid = UUID(uuid=list(raw))
                 if feedback_callback is not None:
                     self._watch(bytes(goal_uuid.uuid))
+            revision = 0
+            if self._plan is not None and goal_uuid is not None and feedback_callback is not None:
+                revision = self._plan.revision_matching(bytes(goal_uuid.uuid))
+            if goal_uuid is not None and (self._held or (
+                    revision > self._confirmed_revision and self._feedback_writer_is_remote())):
+                return self._hold(_HeldGoal(revision, goal, feedback_callback, goal_uuid,
+                                            Future()))
             return super().send_goal_async(goal, feedback_callback, goal_uuid)
 
     def destroy(self) -> None:
         """Destroy the underlying action client handle."""
         self._node.destroy_timer(self._release_timer)
+        self._node.destroy_timer(self._arrival_timer)
+        with self._filter_lock:
+            self._end_probe()
         super().destroy()
+
+    # --- proof of arrival of filter updates -------------------------------------------------------
+
+    def _feedback_writer_is_remote(self) -> bool:
+        """Whether a feedback writer that this client knows of is in another participant.
+
+        Fast DDS does not filter in the writer within a participant, and a writer not discovered
+        yet matches the reader with the filter in force; neither needs a proof.
+        """
+        topic = f'{self._resolved_action_name}/_action/feedback'
+        if self._own_participant is None:
+            name, namespace = self._node.get_name(), self._node.get_namespace()
+            for info in self._node.get_subscriptions_info_by_topic(topic):
+                if (info.node_name, info.node_namespace) == (name, namespace):
+                    self._own_participant = participant_of(info.endpoint_gid)
+                    break
+            else:
+                return True  # not seen ourselves yet: ask for the proof rather than guess
+        return any(participant_of(info.endpoint_gid) != self._own_participant
+                   for info in self._node.get_publishers_info_by_topic(topic))
+
+    def _needed_revision(self) -> int:
+        return max((held.revision for held in self._held), default=0)
+
+    def _hold(self, held: _HeldGoal) -> Future:
+        self._held.append(held)
+        self._held_goals += 1
+        if self._arrival_probe is None:
+            self._start_probe()
+        return held.future
+
+    def _start_probe(self) -> None:
+        # A random goal id with a zero stamp asks to cancel that goal only, which no server has:
+        # the reply is ERROR_UNKNOWN_GOAL_ID, and no cancel callback runs.
+        request = CancelGoal.Request()
+        request.goal_info.goal_id.uuid = list(random_uuid4())
+        self._arrival_probe = ServiceProbe(
+            self._node, CancelGoal, f'{self._resolved_action_name}/_action/cancel_goal', request,
+            self._cancel_qos)
+        self._probe_revision = self._plan.revision if self._plan is not None else 0
+        self._probe_started_at = time.monotonic()
+        self._arrival_timer.reset()
+
+    def _end_probe(self) -> None:
+        if self._arrival_probe is not None:
+            self._arrival_probe.destroy()
+            self._arrival_probe = None
+
+    def _poll_arrival(self) -> None:
+        with self._filter_lock:
+            probe = self._arrival_probe
+            if probe is None:
+                self._arrival_timer.cancel()
+                return
+            now = time.monotonic()
+            if probe.poll(now):
+                self._confirmed_revision = max(self._confirmed_revision, self._probe_revision)
+                self._end_probe()
+                self._send_held(self._confirmed_revision)
+            elif now - self._probe_started_at >= FILTER_ARRIVAL_TIMEOUT:
+                self._arrival_timeouts += 1
+                if self._arrival_timeouts == 1:
+                    self._cft_logger.warning(
+                        f'the action server did not answer {probe.service_name} within '
+                        f'{FILTER_ARRIVAL_TIMEOUT:g} s, so the arrival of a filter update is not '
+                        'proven: held goals are sent without it, and the first feedback that the '
+                        'server publishes for them may be lost')
+                self._end_probe()
+                self._send_held(self._needed_revision())
+            else:
+                return
+            if self._held:
+                self._start_probe()
+            else:
+                self._arrival_timer.cancel()
+
+    def _send_held(self, up_to_revision: int) -> None:
+        """Send the held requests, in order, up to the first one that needs a later revision."""
+        while self._held and self._held[0].revision <= up_to_revision:
+            held = self._held.pop(0)
+            if held.future.cancelled():
+                continue
+            sent = super().send_goal_async(held.goal, held.feedback_callback, held.goal_uuid)
+            _forward(sent, held.future)
 
     # --- goal bookkeeping -------------------------------------------------------------------------
 

@@ -69,6 +69,8 @@ class GoalFilterPlan:
         self._live: dict[bytes, bytes] = {}   # goal UUID -> the prefix its term matches
         self._reserved: list[bytes] = []      # generated UUIDs announced, not yet used
         self._applied: frozenset[bytes] = frozenset()  # prefixes in the expression in force
+        self._added_in: dict[bytes, int] = {}  # prefix in force -> the revision that added it
+        self.revision = 0  # expressions made so far; the initial one is revision 1
         self._generated: set[bytes] = set()   # UUIDs this plan drew itself, matched by prefix
 
     # --- UUIDs -----------------------------------------------------------------------------------
@@ -127,6 +129,17 @@ class GoalFilterPlan:
         self._live[goal_uuid] = prefix
         return prefix not in self._applied
 
+    def revision_matching(self, goal_uuid: bytes) -> int:
+        """The revision of the expression that first matched this goal, or 0 if none does.
+
+        The initial expression (revision 1) reaches every writer with the reader itself; a later
+        one travels by discovery, so a goal matched only by it must wait until the writer has it.
+        """
+        if self.tag is not None and goal_uuid.startswith(self.tag):
+            return 1
+        return min((revision for prefix, revision in self._added_in.items()
+                    if goal_uuid.startswith(prefix)), default=0)
+
     def finish(self, goal_uuid: bytes) -> None:
         """Forget a goal: its term is dropped with the next update or shrink."""
         self._live.pop(goal_uuid, None)
@@ -176,6 +189,8 @@ class GoalFilterPlan:
             raise ExpressionTooLong(
                 f'a filter over {len(wanted)} goals is {len(expression.encode())} bytes, over the '
                 f'{MAX_EXPRESSION_BYTES} that fit into a discovery message')
+        self.revision += 1
+        self._added_in = {prefix: self._added_in.get(prefix, self.revision) for prefix in wanted}
         self._applied = wanted
         return expression
 

@@ -62,7 +62,6 @@ from rcl_interfaces.msg import ParameterEvent
 from rcl_interfaces.srv import GetParameterTypes
 from rclpy.callback_groups import CallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_event_handler import (
@@ -70,11 +69,12 @@ from rclpy.parameter_event_handler import (
     ParameterEventCallbackHandle,
     ParameterEventHandler as _RclpyParameterEventHandler,
 )
-from rclpy.qos import qos_profile_parameter_events, qos_profile_services_default, QoSProfile
+from rclpy.qos import qos_profile_parameter_events, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.subscription import Subscription
 
 from cft_action._rcl import ContentFilterError
+from cft_action.arrival import participant_of, ServiceProbe
 from cft_action.filters import dds_literal, dds_literals, Literal, never_match_on
 from cft_action.subscription import (
     ContentFilterOptions,
@@ -105,15 +105,10 @@ NO_NODES = never_match_on(NODE_FIELD)
 #: Fast DDS accepts at most ``%0`` .. ``%99``.
 MAX_EXPRESSION_PARAMETERS = 100
 
-#: How often wait_for_filter polls, and how long a probe request may go unanswered before it is
-#: sent again (a server that has not yet matched the client's response reader drops the reply).
+#: How often wait_for_filter polls its probes.
 _PROBE_POLL_S = 0.01
-_PROBE_RESEND_S = 0.5
 #: How long wait_for_filter probes one node of a participant before it tries the next one.
 _PROBE_TURN_S = 2.0
-
-#: The length of a GUID prefix, which names the participant, at the start of an endpoint GID.
-_GUID_PREFIX_LEN = 12
 
 _EVENT_CALLBACK_REASON = ('a parameter event callback (add_parameter_event_callback) is registered '
                           'and needs the events of every node')
@@ -591,8 +586,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             target = self._updates
             if self._confirmed_updates == target:
                 return True
-        # service -> (participant, client, when its last request was sent)
-        probes: dict[str, tuple] = {}
+        probes: dict[str, tuple[bytes, ServiceProbe]] = {}  # service -> (participant, probe)
         turns: dict[bytes, tuple[int, float]] = {}  # participant -> (node index, since when)
         answered: set[bytes] = set()
         try:
@@ -603,10 +597,8 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
                            if participant not in answered}
                 for participant, services in pending.items():
                     self._probe(participant, services, probes, turns, now)
-                for participant, client, _ in probes.values():
-                    with client:
-                        header, _ = client.take_response(GetParameterTypes.Response)
-                    if header is not None:
+                for participant, probe in probes.values():
+                    if probe.answered():
                         answered.add(participant)
                 if not pending:
                     break
@@ -614,8 +606,8 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
                     return False
                 time.sleep(_PROBE_POLL_S)
         finally:
-            for _, client, _ in probes.values():
-                client.destroy_when_not_in_use()
+            for _, probe in probes.values():
+                probe.destroy()
         with self._filter_lock:
             if self._destroyed or self._updates != target:
                 return False
@@ -629,13 +621,13 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         A participant whose nodes' names are not known yet maps to no service: it stays pending.
         """
         name, namespace = self.node.get_name(), self.node.get_namespace()
-        own = {bytes(info.endpoint_gid[:_GUID_PREFIX_LEN])
+        own = {participant_of(info.endpoint_gid)
                for topic in (PARAMETER_EVENTS_TOPIC, '/rosout')
                for info in self.node.get_publishers_info_by_topic(topic)
                if (info.node_name, info.node_namespace) == (name, namespace)}
         services: dict[bytes, list[str]] = {}
         for info in self.node.get_publishers_info_by_topic(PARAMETER_EVENTS_TOPIC):
-            participant = bytes(info.endpoint_gid[:_GUID_PREFIX_LEN])
+            participant = participant_of(info.endpoint_gid)
             if participant in own:
                 continue
             candidates = services.setdefault(participant, [])
@@ -646,7 +638,8 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
                 candidates.append(service)
         return services
 
-    def _probe(self, participant: bytes, services: list[str], probes: dict[str, tuple],
+    def _probe(self, participant: bytes, services: list[str],
+               probes: dict[str, tuple[bytes, ServiceProbe]],
                turns: dict[bytes, tuple[int, float]], now: float) -> None:
         """Send, or send again, the probe request to one of ``participant``'s ``services``.
 
@@ -661,14 +654,6 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             turns[participant] = (index, since)
         service = services[index % len(services)]
         if service not in probes:
-            with self.node.handle:
-                client = _rclpy.Client(self.node.handle, GetParameterTypes, service,
-                                       qos_profile_services_default.get_c_qos_profile())
-            probes[service] = (participant, client, None)
-        _, client, sent = probes[service]
-        if sent is not None and now - sent < _PROBE_RESEND_S:
-            return
-        with client:
-            if client.service_server_is_available():
-                client.send_request(GetParameterTypes.Request())
-                probes[service] = (participant, client, now)
+            probes[service] = (participant, ServiceProbe(
+                self.node, GetParameterTypes, service, GetParameterTypes.Request()))
+        probes[service][1].send_if_due(now)

@@ -102,3 +102,29 @@ def test_reserve_is_dropped_before_refusing():
         if plan.watch(plan.uuid_for_feedback()):
             plan.grow()
     assert len(plan.grow().encode()) <= MAX_EXPRESSION_BYTES
+
+
+def test_revisions_tell_which_update_first_matched_a_goal():
+    """A goal matched only by a later expression must wait for that update at the server."""
+    plan = GoalFilterPlan('goals', reserve=2)
+    plan.initial()
+    assert plan.revision == 1
+    reserved = [plan.uuid_for_feedback() for _ in range(2)]
+    assert [plan.revision_matching(u) for u in reserved] == [1, 1]
+    assert not any(plan.watch(u) for u in reserved)
+    fresh = plan.uuid_for_feedback()  # the reserve is used up
+    assert plan.revision_matching(fresh) == 0 and plan.watch(fresh)
+    plan.grow()
+    assert plan.revision == 2 and plan.revision_matching(fresh) == 2
+    assert plan.revision_matching(reserved[0]) == 1  # a term keeps the revision that added it
+    plan.finish(fresh)
+    plan.shrink()
+    assert plan.revision == 3 and plan.revision_matching(fresh) == 0
+
+    client = GoalFilterPlan('client')
+    client.initial()
+    assert client.revision_matching(client.tagged_uuid()) == 1
+    foreign = uuid.uuid4().bytes
+    assert client.watch(foreign)
+    client.grow()
+    assert client.revision_matching(foreign) == 2

@@ -95,8 +95,6 @@ def main() -> None:
     state = getattr(client, 'feedback_filter_state', None)
     print('RESULT ' + json.dumps({
         'complete_goals': sum(ks == list(range(order)) for ks in received.values()),
-        # goals that got every message but the first, which the server publishes at once
-        'lost_only_the_first': sum(ks == list(range(1, order)) for ks in received.values()),
         'own_received': sum(len(ks) for ks in received.values()),
         'misrouted': misrouted,
         'results': sum(r.done() for r in results),
@@ -104,7 +102,8 @@ def main() -> None:
         'incomplete': repr({i: ks for i, ks in enumerate(received.values())
                             if ks != list(range(order))})[:400],
         **({'taken': state.feedback_taken, 'dropped': state.feedback_dropped,
-            'active': state.active, 'reason': state.reason, 'updates': state.updates}
+            'active': state.active, 'reason': state.reason, 'updates': state.updates,
+            'held_goals': state.held_goals, 'arrival_timeouts': state.arrival_timeouts}
            if state else {}),
     }), flush=True)
     sys.stdin.readline()

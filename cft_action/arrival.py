@@ -1,0 +1,95 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""Proof that a filter change has reached the writers of another process.
+
+A content filter change travels to the writers by discovery, and the middleware acknowledges
+nothing: until the change arrives, a writer applies its previous filter. Discovery is one ordered,
+reliable stream per participant, though, and a remote service can only reply to a client once it
+has matched the client's response reader. So the reply of a service of that process, to a client
+created *after* the change, proves that every writer there has processed the change
+(docs/INTERNALS.md, "Proof of arrival").
+
+:class:`ServiceProbe` is that round trip. It is polled, not waited on: the parameter event handler
+polls it in a blocking loop, the action client from a timer of its own callback group.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Optional
+
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.node import Node
+from rclpy.qos import QoSProfile, qos_profile_services_default
+
+__all__ = ['GUID_PREFIX_LEN', 'ServiceProbe', 'participant_of']
+
+#: The length of a GUID prefix, which names the participant, at the start of an endpoint GID.
+GUID_PREFIX_LEN = 12
+
+#: How long a probe request may go unanswered before it is sent again: a server that has not yet
+#: matched the client's request writer drops the request, and one that has not matched its
+#: response reader drops the reply.
+PROBE_RESEND_S = 0.5
+
+
+def participant_of(endpoint_gid: Any) -> bytes:
+    """The GUID prefix of an endpoint's GID (a ``TopicEndpointInfo.endpoint_gid``)."""
+    return bytes(endpoint_gid[:GUID_PREFIX_LEN])
+
+
+class ServiceProbe:
+    """One request to a service, from a client of its own, sent until it is answered.
+
+    Create it after the filter change that it is to prove: the client's endpoints are announced
+    after the change.
+
+    :param node: The node whose participant changed the filter.
+    :param srv_type: The service type.
+    :param service_name: The fully qualified service name.
+    :param request: The request; it must be harmless to the server, since it may arrive twice.
+    :param qos_profile: The client's QoS, the service's default when omitted.
+    """
+
+    def __init__(self, node: Node, srv_type: Any, service_name: str, request: Any,
+                 qos_profile: Optional[QoSProfile] = None) -> None:
+        self.service_name = service_name
+        self._srv_type = srv_type
+        self._request = request
+        self._sent_at: Optional[float] = None
+        with node.handle:
+            self._client = _rclpy.Client(
+                node.handle, srv_type, service_name,
+                (qos_profile or qos_profile_services_default).get_c_qos_profile())
+
+    def poll(self, now: float) -> bool:
+        """Send the request, or send it again, and return True once a reply has come.
+
+        :param now: ``time.monotonic()``.
+        """
+        if self.answered():
+            return True
+        self.send_if_due(now)
+        return False
+
+    def answered(self) -> bool:
+        """Take a reply, if one has come, without sending anything."""
+        with self._client:
+            header, _ = self._client.take_response(self._srv_type.Response)
+        return header is not None
+
+    def send_if_due(self, now: float) -> None:
+        """Send the request if it was never sent, or went unanswered for PROBE_RESEND_S."""
+        if self._sent_at is not None and now - self._sent_at < PROBE_RESEND_S:
+            return
+        with self._client:
+            if self._client.service_server_is_available():
+                self._client.send_request(self._request)
+                self._sent_at = now
+
+    @property
+    def sent(self) -> bool:
+        """Whether the request has been sent at least once."""
+        return self._sent_at is not None
+
+    def destroy(self) -> None:
+        """Destroy the probe's client."""
+        self._client.destroy_when_not_in_use()
