@@ -59,9 +59,10 @@ FINISHED_GOAL_GRACE = 10.0
 RELEASE_CHECK_PERIOD = 1.0
 
 #: Seconds a goal request is held for the proof that the server's feedback writer has the filter
-#: update that matches the goal. The proof is a reply of the server's cancel service, so a server
-#: that answers nothing for this long would not answer the goal either; the goal is then sent
-#: anyway, as rclpy sends it, and its first feedback may be lost.
+#: update that matches the goal, counted from the executor's first poll of the probe. The proof is
+#: a reply of the server's cancel service, so a server that answers nothing for this long would not
+#: answer the goal either; the goal is then sent anyway, as rclpy sends it, and its first feedback
+#: may be lost.
 FILTER_ARRIVAL_TIMEOUT = 5.0
 
 #: Seconds between polls of the arrival probe while goal requests are held.
@@ -194,7 +195,7 @@ class ActionClient(_RclpyActionClient):
         self._held: list[_HeldGoal] = []
         self._arrival_probe: Optional[ServiceProbe] = None
         self._probe_revision = 0
-        self._probe_started_at = 0.0
+        self._probe_polled_since: Optional[float] = None
         self._own_participant: Optional[bytes] = None
         self._held_goals = 0
         self._arrival_timeouts = 0
@@ -434,8 +435,11 @@ class ActionClient(_RclpyActionClient):
         self._arrival_probe = ServiceProbe(
             self._node, CancelGoal, f'{self._resolved_action_name}/_action/cancel_goal', request,
             self._cancel_qos)
-        self._probe_revision = self._plan.revision if self._plan is not None else 0
-        self._probe_started_at = time.monotonic()
+        # Without a plan the filter was abandoned for one that matches everything, which this
+        # probe, created after it, proves as well.
+        self._probe_revision = (self._plan.revision if self._plan is not None
+                                else self._needed_revision())
+        self._probe_polled_since = None
         self._arrival_timer.reset()
 
     def _end_probe(self) -> None:
@@ -450,11 +454,15 @@ class ActionClient(_RclpyActionClient):
                 self._arrival_timer.cancel()
                 return
             now = time.monotonic()
+            if self._probe_polled_since is None:
+                # From the first poll, not from the hold: a caller that sends a burst of goals
+                # before it spins gives the probe no chance until then.
+                self._probe_polled_since = now
             if probe.poll(now):
                 self._confirmed_revision = max(self._confirmed_revision, self._probe_revision)
                 self._end_probe()
                 self._send_held(self._confirmed_revision)
-            elif now - self._probe_started_at >= FILTER_ARRIVAL_TIMEOUT:
+            elif now - self._probe_polled_since >= FILTER_ARRIVAL_TIMEOUT:
                 self._arrival_timeouts += 1
                 if self._arrival_timeouts == 1:
                     self._cft_logger.warning(

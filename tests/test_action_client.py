@@ -268,6 +268,24 @@ def test_a_goal_is_held_until_its_filter_update_has_reached_the_server(
     assert state.confirmed and state.arrival_timeouts == 0, state
 
 
+def test_a_held_goal_waits_from_the_first_spin_not_from_the_call(ros, server, monkeypatch):
+    """A caller that sends goals and spins only later gives the probe no chance before: its wait
+    counts from the executor's first poll, so a late spin does not make it give up."""
+    monkeypatch.setattr(cft_action.client, 'FILTER_ARRIVAL_TIMEOUT', 1.0)
+    action, _ = server
+    client = make_client(ros, action)
+    received = []
+    future = client.send_goal_async(Fibonacci.Goal(order=3), feedback_callback=received.append,
+                                    goal_uuid=UUID(uuid=list(uuid.uuid4().bytes)))
+    time.sleep(1.5)
+    assert ros.spin_until(future.done, 20)
+    assert result_of(ros, future.result()).status == GoalStatus.STATUS_SUCCEEDED
+    ros.spin_until(lambda: len(received) == 3, 5)
+    assert [m.feedback.sequence[0] for m in received] == [0, 1, 2]
+    state = client.feedback_filter_state
+    assert (state.held_goals, state.arrival_timeouts, state.confirmed) == (1, 0, True), state
+
+
 def test_goal_without_feedback_callback_receives_no_feedback(ros, server):
     action, _ = server
     client = make_client(ros, action)
