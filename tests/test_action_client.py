@@ -17,8 +17,9 @@ import cft_action.client
 from cft_action import ActionClient, guard
 from cft_action.client import FINISHED_GOAL_GRACE
 from cft_action.filters import NEVER_MATCH
-from tests.helpers._polling import wait_until
-from tests.support import RosSession, action_server, helper_process, unique_name
+from harness.polling import wait_until
+from harness.ros import RosSession, unique_name
+from tests.support import action_server, helper_process
 
 PERIOD = 0.01  # 100 Hz feedback per goal
 
@@ -41,7 +42,7 @@ def server():
 
 
 def run_clients(server, action, mode, clients, goals, order):
-    children = [helper_process('fib_client.py', [action, mode, goals, order])
+    children = [helper_process('tests.helpers.fib_client', [action, mode, goals, order])
                 for _ in range(clients)]
     try:
         for child in children:
