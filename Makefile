@@ -1,5 +1,6 @@
 # Set-up is part of every target: `make test`, `make lint` and `make demo` create .venv and install
-# into it.
+# into it. Only cft_action is installed; demos, benchmarks, tests and what they share (harness/)
+# are imported from this directory, which `python -m` and pytest put on sys.path.
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
 VENV := .venv
 PY := $(VENV)/bin/python
@@ -21,10 +22,10 @@ lint: $(STAMP)
 	$(PY) -m mypy
 
 demo: $(STAMP)
-	$(PY) demos/load_demo.py
+	$(PY) -m demos.load_demo
 
 bench: $(STAMP)
-	$(PY) benchmarks/sweep.py
+	$(PY) -m benchmarks.sweep
 
 clean:
 	rm -rf $(VENV) build *.egg-info cft_action/*.so .mypy_cache .ruff_cache

@@ -11,10 +11,10 @@ and publishes a burst of 3 events on each node:
 
 It counts the runs in which fewer than the 9 events arrived, and times ``wait_for_filter``::
 
-    python benchmarks/filter_arrival.py --runs 60 --mode burst
-    python benchmarks/filter_arrival.py --runs 60 --mode wait
+    python -m benchmarks.filter_arrival --runs 60 --mode burst
+    python -m benchmarks.filter_arrival --runs 60 --mode wait
 
-The nodes' process (``tests/helpers/param_nodes.py``) runs under the guard. Results go to
+The nodes' process (:mod:`harness.param_nodes`) runs under the guard. Results go to
 ``benchmarks/results/filter-arrival-<mode>-<date>-<host>.json``.
 """
 
@@ -26,20 +26,18 @@ import json
 import os
 import platform
 import random
-import sys
 import time
 import uuid
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 101)))
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
 from cft_action import guard  # noqa: E402
 from cft_action.parameter_events import ParameterEventHandler  # noqa: E402
-from demos._proc import Proc  # noqa: E402
-from tests.support import RosSession  # noqa: E402
+from harness.proc import Proc, python_module  # noqa: E402
+from harness.ros import RosSession  # noqa: E402
 
 BURST = 3
 
@@ -48,7 +46,7 @@ def run(runs: int, mode: str) -> dict:
     ros = RosSession()
     prefix = f'/filter_arrival_{uuid.uuid4().hex[:8]}'
     names = [f'{prefix}/{n}' for n in 'abc']
-    argv = [sys.executable, '-u', str(REPO / 'tests' / 'helpers' / 'param_nodes.py'), *names]
+    argv = python_module('harness.param_nodes', *names)
     nodes = Proc('param_nodes', argv, guard.environment())
     short, waits = [], []
     try:

@@ -6,11 +6,11 @@ filters that feedback out; one that knows the goal before the request is sent do
 the filter change reaches the server's writer before the goal request does.
 
 For each configuration (``client``, ``goals``, ``upstream``, ``rclpy``), one client sends GOALS goals
-of ORDER feedback messages to a guarded server (``demos/_server.py``), either one after another or
+of ORDER feedback messages to a guarded server (:mod:`harness.server`), either one after another or
 all at once, and counts the goals whose first feedback, and whose every feedback, arrived, and
 how long each goal took from ``send_goal_async`` to its goal response (``accept_ms``)::
 
-    python benchmarks/first_feedback.py --goals 200 --order 3
+    python -m benchmarks.first_feedback --goals 200 --order 3
 
 ``--uuids caller`` sends every goal with a caller-supplied random ``goal_uuid``, which the filter
 of a ``client``-mode client does not match yet: each costs a filter update, and a request that is
@@ -27,25 +27,24 @@ import json
 import os
 import platform
 import random
-import sys
 import time
 import uuid
 from pathlib import Path
 from typing import Any
 
+import rclpy
+from rclpy.executors import SingleThreadedExecutor
+from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
+from test_msgs.action import Fibonacci
+from unique_identifier_msgs.msg import UUID
+
+from cft_action import guard
+from harness import client as load_client
+from harness import load
+from harness.proc import Proc, python_module
+
 REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
-
-import rclpy  # noqa: E402
-from rclpy.executors import SingleThreadedExecutor  # noqa: E402
-from rclpy.node import Node  # noqa: E402
-from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy  # noqa: E402
-from test_msgs.action import Fibonacci  # noqa: E402
-from unique_identifier_msgs.msg import UUID  # noqa: E402
-
-from cft_action import guard  # noqa: E402
-from demos import _client, _harness  # noqa: E402
-from demos._proc import Proc  # noqa: E402
 
 CONFIGS = ('client', 'goals', 'upstream', 'rclpy')
 QOS = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
@@ -65,9 +64,9 @@ def run_config(config: str, action: str, goals: int, order: int, burst: bool,
     node = Node(f'first_feedback_{config}')
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    client = _client.make_client(node, config, action, QOS)
+    client = load_client.make_client(node, config, action, QOS)
     try:
-        if not _client.probe(node, executor, client, 20):
+        if not load_client.probe(node, executor, client, 20):
             raise SystemExit(f'{config}: the server did not answer')
         received: dict[int, list[int]] = {}
         results = []
@@ -93,12 +92,12 @@ def run_config(config: str, action: str, goals: int, order: int, burst: bool,
                 spin_until(executor, lambda: len(results) > index and results[index].done(), 20)
         spin_until(executor, lambda: len(results) == goals and all(r.done() for r in results), 60)
         spin_until(executor, lambda: False, 1.0)  # stragglers
-        counters = _client.filter_counters(client)
+        counters = load_client.filter_counters(client)
         return {
             'config': config, 'goals': goals, 'order': order, 'burst': burst,
             'caller_uuids': caller_uuids,
-            'accept_ms_p50': _harness.percentile(accept_ms, 0.5),
-            'accept_ms_p95': _harness.percentile(accept_ms, 0.95),
+            'accept_ms_p50': load.percentile(accept_ms, 0.5),
+            'accept_ms_p95': load.percentile(accept_ms, 0.95),
             'accept_ms_max': max(accept_ms, default=None),
             'first_arrived': sum(1 for ks in received.values() if 0 in ks),
             'complete': sum(1 for ks in received.values() if sorted(ks) == list(range(order))),
@@ -124,8 +123,8 @@ def main() -> None:
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     rclpy.init()
     action = f'/first_feedback_{random.randrange(1 << 32):08x}'
-    server = Proc('server', [sys.executable, '-u', str(REPO / 'demos' / '_server.py'), action,
-                             str(args.period), '--depth', '1000'], guard.environment())
+    server = Proc('server', python_module('harness.server', action, args.period, '--depth', 1000),
+                  guard.environment())
     rows = []
     try:
         server.expect('READY', 30)
@@ -156,7 +155,7 @@ def main() -> None:
         f'first-feedback-{now:%Y-%m-%d}-{platform.node()}-{args.uuids}.json'
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({'date': now.isoformat(), 'host': platform.node(),
-                               'machine': _harness.environment_facts(), 'args': vars(args),
+                               'machine': load.environment_facts(), 'args': vars(args),
                                'load_average': os.getloadavg(), 'rows': rows}, indent=1))
     print(f'\nresults: {out}')
 

@@ -19,7 +19,7 @@ guarded. The two configurations alternate within each of ``--reps`` repetitions,
 in the machine's load hits both. Every process has a random ROS domain (1..101) and localhost-only
 discovery; every wait is bounded.
 
-    python benchmarks/guard_overhead.py --reps 5
+    python -m benchmarks.guard_overhead --reps 5
 """
 
 from __future__ import annotations
@@ -40,15 +40,8 @@ import uuid
 from pathlib import Path
 from typing import Any, Optional
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
-
-from benchmarks.hazard import machine_line, plain_env, server_env  # noqa: E402
-from demos._proc import Proc, run_role  # noqa: E402
-
-THIS = Path(__file__).resolve()
-PYTHON = sys.executable
+from harness.crash import machine_line, plain_env, server_env
+from harness.proc import Proc, python_module, run_role
 
 
 def say(*words: object) -> None:
@@ -277,7 +270,7 @@ def env_for(domain: int, guarded: bool) -> dict[str, str]:
 
 def throughput_once(guarded: bool, opts: argparse.Namespace) -> dict[str, Any]:
     domain, topic = random.randint(1, 101), f'ovh_{uuid.uuid4().hex[:8]}'
-    role = [PYTHON, str(THIS), '_role']
+    role = python_module('benchmarks.guard_overhead', '_role')
     sink = Proc('sink', [*role, 'sink', topic, '120'], plain_env(domain))
     pub = None
     try:
@@ -305,7 +298,7 @@ def throughput_once(guarded: bool, opts: argparse.Namespace) -> dict[str, Any]:
 def latency_once(guarded: bool, opts: argparse.Namespace) -> dict[str, Any]:
     domain = random.randint(1, 101)
     there, back = f'ovh_ping_{uuid.uuid4().hex[:8]}', f'ovh_pong_{uuid.uuid4().hex[:8]}'
-    role = [PYTHON, str(THIS), '_role']
+    role = python_module('benchmarks.guard_overhead', '_role')
     pong = Proc('pong', [*role, 'pong', there, back, '120'], env_for(domain, guarded))
     ping = None
     try:
@@ -354,7 +347,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     opts = parser.parse_args(argv)
     header = {'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M'),
               'machine': machine_line(),
-              'command': 'python benchmarks/guard_overhead.py ' + ' '.join(argv)}
+              'command': 'python -m benchmarks.guard_overhead ' + ' '.join(argv)}
     print(json.dumps(header), flush=True)
     results: dict[str, dict[str, list[dict[str, Any]]]] = {
         'throughput': {'off': [], 'on': []}, 'latency': {'off': [], 'on': []}}

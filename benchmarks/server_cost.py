@@ -2,7 +2,7 @@
 
 For every point (feedback size x N client processes, one goal each) one guarded server runs the
 configurations one after another, plain rclpy first, through the load harness of ``make demo``
-(``demos/_harness.py``). Every figure is compared with the plain rclpy phase of the same server, as
+(:mod:`harness.load`). Every figure is compared with the plain rclpy phase of the same server, as
 a ratio:
 
 - ``rate``: feedback messages the server published per second, from ``go`` until its last goal
@@ -38,7 +38,7 @@ import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
-from demos import _harness
+from harness import load
 
 REPO = Path(__file__).resolve().parent.parent
 #: int32 elements after the 3-element header: 36 B, 1 kB and 10 kB feedback messages.
@@ -46,7 +46,7 @@ SIZES = {'36B': 0, '1k': 250, '10k': 2500}
 GUARD_MODES = {'accelerated': {}, 'locking': {'CFT_GUARD_ACCELERATE': '0'}}
 
 
-class CappedRun(_harness.LoadRun):
+class CappedRun(load.LoadRun):
     """A load run whose phases stop waiting for their goals after a fixed time."""
 
     phase_timeout = 120.0
@@ -112,8 +112,8 @@ def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
     }
 
 
-def run_point(spec: _harness.LoadSpec, configs: Sequence[str], timeout: float,
-              progress: _harness.Progress, profile_dir: Optional[Path] = None
+def run_point(spec: load.LoadSpec, configs: Sequence[str], timeout: float,
+              progress: load.Progress, profile_dir: Optional[Path] = None
               ) -> list[dict[str, Any]]:
     """Run ``configs`` under ``spec``; a fresh server after any phase that was cut."""
     figures: list[dict[str, Any]] = []
@@ -162,7 +162,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--guards', default='accelerated,locking',
                         help='guard modes, from: ' + ', '.join(GUARD_MODES))
     parser.add_argument('--configs', default='rclpy,client,goals,upstream',
-                        help='from: ' + ', '.join(_harness.CONFIG_LABELS) + ' (rclpy first)')
+                        help='from: ' + ', '.join(load.CONFIG_LABELS) + ' (rclpy first)')
     parser.add_argument('--rate', type=float, default=100.0, help='feedback Hz per goal')
     parser.add_argument('--duration', type=float, default=2.0,
                         help='nominal seconds of feedback per goal')
@@ -183,7 +183,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     args.configs = [c for c in args.configs.split(',') if c]
     for name, values, known in (('--sizes', args.sizes, SIZES), ('--guards', args.guards,
                                                                   GUARD_MODES),
-                                ('--configs', args.configs, _harness.CONFIG_LABELS)):
+                                ('--configs', args.configs, load.CONFIG_LABELS)):
         unknown = set(values) - set(known)
         if unknown:
             parser.error(f'{name}: unknown {", ".join(sorted(unknown))}')
@@ -199,17 +199,17 @@ def format_table(points: list[dict[str, Any]]) -> str:
         for f in point['figures']:
             if 'error' in f:
                 rows.append((point['guard'], point['size'], str(point['clients']),
-                             _harness.CONFIG_LABELS[f['config']] + ' (failed)', *['-'] * 8))
+                             load.CONFIG_LABELS[f['config']] + ' (failed)', *['-'] * 8))
                 continue
             r = f['ratio_to_plain']
             gf = f['guard_filter']
             rows.append((point['guard'], point['size'], str(point['clients']),
-                         _harness.CONFIG_LABELS[f['config']] + (' (cut)' if f['timed_out'] else ''),
+                         load.CONFIG_LABELS[f['config']] + (' (cut)' if f['timed_out'] else ''),
                          str(f['published']), _fmt(f['goals_s'], '.1f'),
                          _fmt(f['rate_msgs_per_s'], '.0f'), _fmt(r['rate'], '.2f'),
                          _fmt(f['cpu_ms_per_msg'], '.3f'), _fmt(r['cpu_per_msg'], '.2f'),
                          str(gf.get('uuid_verdicts', '-')), str(gf.get('fastdds_verdicts', '-'))))
-    return _harness._grid(rows)
+    return load._grid(rows)
 
 
 def markdown(points: list[dict[str, Any]]) -> str:
@@ -221,7 +221,7 @@ def markdown(points: list[dict[str, Any]]) -> str:
             continue
         configs = [f['config'] for f in mine[0]['figures'] if f['config'] != 'rclpy']
         head = ['feedback', 'N', 'plain: msgs/s, CPU ms/msg']
-        head += [f'{_harness.CONFIG_LABELS[c]}: rate, CPU/msg' for c in configs]
+        head += [f'{load.CONFIG_LABELS[c]}: rate, CPU/msg' for c in configs]
         out += [f'Guard {guard_mode}: ratios to plain rclpy (rate: higher is better; CPU per '
                 'message: lower is better; "cut": the goals had not finished after the phase '
                 'timeout, the rate is what was published until then)', '',
@@ -274,7 +274,7 @@ def plot(points: list[dict[str, Any]], path: Path) -> None:
                     if f and f.get('ratio_to_plain', {}).get('rate') is not None:
                         xs.append(p['clients'])
                         ys.append(f['ratio_to_plain']['rate'])
-                ax.plot(xs, ys, marker='o', label=_harness.CONFIG_LABELS[config])
+                ax.plot(xs, ys, marker='o', label=load.CONFIG_LABELS[config])
             ax.axhline(0.9, color='grey', linestyle=':', linewidth=1)
             ax.set_xscale('log', base=2)
             ax.set_yscale('log')
@@ -306,7 +306,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         'benchmark': 'server_cost', 'started': started.isoformat(timespec='seconds'),
         'command': 'python -m benchmarks.server_cost ' + ' '.join(sys.argv[1:] if argv is None
                                                                  else argv),
-        'machine': _harness.environment_facts(), 'order': order, 'rate_hz': args.rate,
+        'machine': load.environment_facts(), 'order': order, 'rate_hz': args.rate,
         'points': []}
     total = len(args.guards) * len(args.sizes) * len(args.clients)
     t0 = time.monotonic()
@@ -320,7 +320,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             for n in args.clients:
                 done += 1
                 progress(f'point {done}/{total}: guard {guard_mode}, {size} feedback, N = {n}')
-                spec = _harness.LoadSpec(clients=n, goals=1, order=order, rate_hz=args.rate,
+                spec = load.LoadSpec(clients=n, goals=1, order=order, rate_hz=args.rate,
                                          pad=SIZES[size], network='count', settle_s=2.0,
                                          server_env=GUARD_MODES[guard_mode])
                 if args.profile:
@@ -328,7 +328,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 figures = run_point(spec, args.configs, args.phase_timeout, progress,
                                     args.profile)
                 result['points'].append({'guard': guard_mode, 'size': size, 'clients': n,
-                                         'feedback_bytes': _harness.feedback_size(SIZES[size]),
+                                         'feedback_bytes': load.feedback_size(SIZES[size]),
                                          'figures': figures})
                 output.parent.mkdir(parents=True, exist_ok=True)
                 output.write_text(json.dumps(result, indent=1))

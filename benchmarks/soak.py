@@ -2,7 +2,7 @@
 """The soak: one action server, eight client processes that keep coming and going, for minutes.
 
 One Fibonacci action server publishes feedback every 10 ms (100 Hz) to each running goal
-(``demos/_server.py``, keep-last 1000 reliable queues). ``--clients`` (8) slots each
+(:mod:`harness.server`, keep-last 1000 reliable queues). ``--clients`` (8) slots each
 run client processes one after the other until the time is up. A client process:
 
 1. creates its action client in the mode under test, waits for the server and completes one goal
@@ -16,7 +16,7 @@ run client processes one after the other until the time is up. A client process:
 
 Modes: ``client`` and ``goals`` (:class:`cft_action.ActionClient`), ``rclpy`` (plain
 :class:`rclpy.action.ActionClient`, the baseline, only when asked for) and ``upstream``
-(:class:`benchmarks._upstream.UpstreamEquivalentActionClient`, the Rolling algorithm: 16 ``%n``
+(:class:`harness.upstream.UpstreamEquivalentActionClient`, the Rolling algorithm: 16 ``%n``
 parameters per goal, a goal added on acceptance and removed on its result, ``""`` after the last
 goal, disabled for good past 6 goals). Each mode runs with the server guard ``on`` and ``off``.
 
@@ -34,8 +34,8 @@ Feedback is counted where rclpy takes it from rcl (``take_data``), not in callba
 modes are measured alike. Every process has one random ROS domain (1..101) per configuration and
 localhost-only discovery; every wait is bounded.
 
-    python benchmarks/soak.py                         # 10 minutes per configuration, 6 of them
-    python benchmarks/soak.py --minutes 2 --modes client goals --guard on
+    python -m benchmarks.soak                         # 10 minutes per configuration, 6 of them
+    python -m benchmarks.soak --minutes 2 --modes client goals --guard on
 """
 
 from __future__ import annotations
@@ -55,17 +55,11 @@ import uuid
 from pathlib import Path
 from typing import Any, Optional
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+from harness.crash import (alive, core_backtrace, crash_site, machine_line, plain_env,
+                           server_command, server_env, signal_name, stats_of)
+from harness.proc import Proc, python_module, run_role
+from harness.server import queue_kwargs
 
-from benchmarks.hazard import (core_backtrace, crash_site, machine_line,  # noqa: E402
-                               plain_env, server_command, server_env, signal_name, stats_of)
-from demos._proc import Proc, run_role  # noqa: E402
-from demos._server import queue_kwargs  # noqa: E402
-
-THIS = Path(__file__).resolve()
-PYTHON = sys.executable
 MODES = ('client', 'goals', 'upstream')
 DEPTH = 1000
 #: Seconds a client waits, after its last result, for feedback still on the way (see role_client).
@@ -107,7 +101,7 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
     node = Node(f'soak_{uuid.uuid4().hex[:8]}')
     qos = queue_kwargs(str(DEPTH), 'sub')
     if mode == 'upstream':
-        from benchmarks._upstream import UpstreamEquivalentActionClient
+        from harness.upstream import UpstreamEquivalentActionClient
         client = _counting(UpstreamEquivalentActionClient)(node, Fibonacci, action, **qos)
     elif mode == 'rclpy':
         from rclpy.action import ActionClient as RclpyActionClient
@@ -335,9 +329,9 @@ class Soak:
         seed = self.seed + slot * 100_000 + n
         start = time.monotonic()
         proc = Proc(f'client{slot}.{n}',
-                    [PYTHON, str(THIS), '_role', 'client', self.action, self.mode, str(seed),
-                     str(o.max_goals), str(o.orders[0]), str(o.orders[1]), str(o.cancel),
-                     str(o.period)], plain_env(self.domain))
+                    python_module('benchmarks.soak', '_role', 'client', self.action, self.mode,
+                                  seed, o.max_goals, o.orders[0], o.orders[1], o.cancel,
+                                  o.period), plain_env(self.domain))
         line = proc.wait_for('RESULT', 90.0 + STRAGGLER_S + o.orders[1] * o.period * 3)
         rc = proc.wait(15.0)
         if rc is None:
@@ -419,9 +413,8 @@ class Soak:
             f'server crashes {len(self.crashes)}')
 
     def server_dead_in_proc(self) -> bool:
-        from benchmarks.hazard import _alive
         assert self.server is not None
-        return not _alive(self.server.pid)
+        return not alive(self.server.pid)
 
     def disrupted(self, life: dict[str, Any]) -> bool:
         return any(life['start'] <= ready and life['end'] >= alive
@@ -509,7 +502,7 @@ def main(argv: Optional[list[str]] = None) -> int:
     parser.add_argument('--json', metavar='PATH', help='also write the results as JSON')
     opts = parser.parse_args(argv)
     header = {'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M'),
-              'machine': machine_line(), 'command': 'python benchmarks/soak.py ' + ' '.join(argv)}
+              'machine': machine_line(), 'command': 'python -m benchmarks.soak ' + ' '.join(argv)}
     print(json.dumps(header), flush=True)
     results = []
     configs = [(mode, g == 'on') for _ in range(opts.runs) for mode in opts.modes

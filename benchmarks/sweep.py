@@ -2,11 +2,11 @@
 
 For every load point (N client processes x M goals each, feedback rate, feedback size) one guarded
 server runs four configurations one after another, through the same harness as ``make demo``
-(``demos/_harness.py``):
+(:mod:`harness.load`):
 
 - ``rclpy``: plain ``rclpy.action.ActionClient``;
 - ``client`` and ``goals``: ``cft_action.ActionClient`` in those modes;
-- ``upstream``: the upstream (Rolling) design, emulated in ``benchmarks/_upstream.py``.
+- ``upstream``: the upstream (Rolling) design, emulated in :mod:`harness.upstream`.
 
 Each goal lasts ``--duration`` seconds (``order = duration x rate`` feedback messages). Results,
 with the machine, the versions, the command and every raw figure, go to
@@ -18,7 +18,7 @@ small and 10 kB feedback: 84 points, several hours on a small machine, and past 
 feedback messages per second the Python server cannot keep the rate (the results record the rate it
 achieved). A reduced grid, as in docs/BENCHMARKS.md::
 
-    python benchmarks/sweep.py --clients 1,4,16,32,40 --goals 1,4 --rates 100 --sizes small
+    python -m benchmarks.sweep --clients 1,4,16,32,40 --goals 1,4 --rates 100 --sizes small
 
 ``--anatomy`` instead runs one point with a packet capture on one client per configuration, to
 break its received bytes down by kind (feedback data, GAPs, status, discovery).
@@ -36,11 +36,9 @@ import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
-# Run as a script: make the repository importable.
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO))
+from harness import load
 
-from demos import _harness  # noqa: E402
+REPO = Path(__file__).resolve().parent.parent
 
 SIZES = {'small': 0, '10k': 2500}  # int32 elements of padding; 2500 makes a 10 kB message
 #: Fast DDS's writer keeps filters for at most this many readers (reader_filters_allocation).
@@ -70,7 +68,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--duration', type=float, default=2.0,
                         help='seconds of feedback per goal (order = duration x rate)')
     parser.add_argument('--configs', default='rclpy,client,goals,upstream',
-                        help='comma-separated, from: ' + ', '.join(_harness.CONFIG_LABELS))
+                        help='comma-separated, from: ' + ', '.join(load.CONFIG_LABELS))
     parser.add_argument('--network', choices=('auto', 'netns', 'count'), default='auto')
     parser.add_argument('--drain-timeout', type=float, default=300.0,
                         help='seconds a phase may take after its goals finished')
@@ -89,7 +87,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     args.sizes = [s.strip() for s in args.sizes.split(',') if s.strip()]
     args.configs = [c.strip() for c in args.configs.split(',') if c.strip()]
     for name, values, known in (('--sizes', args.sizes, SIZES),
-                                ('--configs', args.configs, _harness.CONFIG_LABELS)):
+                                ('--configs', args.configs, load.CONFIG_LABELS)):
         unknown = set(values) - set(known)
         if unknown:
             parser.error(f'{name}: unknown {", ".join(sorted(unknown))}')
@@ -113,19 +111,19 @@ def default_output() -> Path:
     return REPO / 'benchmarks' / 'results' / f'{date}-{platform.node()}.json'
 
 
-def capturing_run_class() -> type[_harness.LoadRun]:
+def capturing_run_class() -> type[load.LoadRun]:
     """A load run that captures the first client's traffic in every phase (for ``--anatomy``)."""
-    from demos import _netns
-    from demos._proc import Proc
+    from harness import netns
+    from harness.proc import Proc, python_module
 
-    class CapturingRun(_harness.LoadRun):
+    class CapturingRun(load.LoadRun):
         def window_started(self, clients: list[Proc],
                            server_stats: dict[str, Any]) -> None:
             if not self.topology:
                 raise RuntimeError('--anatomy needs network namespaces (root and iproute2)')
             writers = server_stats['writers']
-            argv = [sys.executable, '-u', str(REPO / 'benchmarks' / '_capture.py'),
-                    _netns.INTERFACE, ','.join(writers['feedback']), ','.join(writers['status'])]
+            argv = python_module('benchmarks._capture', netns.INTERFACE,
+                                 ','.join(writers['feedback']), ','.join(writers['status']))
             self._capture = Proc('capture', self.topology.command(self.topology.clients[0], argv),
                                  self.env)
             self._capture.expect('SNIFFING', 30)
@@ -146,9 +144,9 @@ def run(args: argparse.Namespace) -> Path:
     output.parent.mkdir(parents=True, exist_ok=True)
     started = time.monotonic()
     results: dict[str, Any] = {
-        'command': ' '.join([Path(sys.executable).name, *sys.argv]),
+        'command': ' '.join([Path(sys.executable).name, '-m', 'benchmarks.sweep', *sys.argv[1:]]),
         'date': datetime.datetime.now().astimezone().isoformat(timespec='seconds'),
-        'machine': _harness.environment_facts(),
+        'machine': load.environment_facts(),
         'grid': {'clients': args.clients, 'goals': args.goals, 'rates_hz': args.rates,
                  'sizes': args.sizes, 'duration_s': args.duration, 'configs': args.configs,
                  'anatomy': args.anatomy},
@@ -159,9 +157,9 @@ def run(args: argparse.Namespace) -> Path:
     def progress(line: str) -> None:
         print(f'[{time.monotonic() - started:7.1f} s] {line}', flush=True)
 
-    run_class = capturing_run_class() if args.anatomy else _harness.LoadRun
+    run_class = capturing_run_class() if args.anatomy else load.LoadRun
     for i, point in enumerate(points, 1):
-        spec = _harness.LoadSpec(
+        spec = load.LoadSpec(
             clients=point['clients'], goals=point['goals'], rate_hz=point['rate_hz'],
             order=max(1, round(args.duration * point['rate_hz'])), pad=SIZES[point['size']],
             network=args.network, drain_timeout=args.drain_timeout,
@@ -170,7 +168,7 @@ def run(args: argparse.Namespace) -> Path:
                  f'{spec.rate_hz:g} Hz {point["size"]}')
         point_started = time.monotonic()
         try:
-            result = _harness.run_load(spec, args.configs, progress, run_class)
+            result = load.run_load(spec, args.configs, progress, run_class)
         except Exception as e:  # keep the sweep going; the failure is a result too
             progress(f'point failed: {e}')
             result = {'spec': vars(spec).copy(), 'error': str(e), 'phases': []}
@@ -180,7 +178,7 @@ def run(args: argparse.Namespace) -> Path:
         results['elapsed_s'] = time.monotonic() - started
         output.write_text(json.dumps(results, indent=1))
         if result['phases']:
-            print(_harness.format_table(result), flush=True)
+            print(load.format_table(result), flush=True)
     progress(f'results: {output}')
     return output
 
@@ -203,14 +201,14 @@ def _series(results: dict[str, Any], config: str, goals: int, rate: float, size:
 
 def plot(results: dict[str, Any], directory: Path) -> list[Path]:
     """Draw the sweep's plots into ``directory``; return their paths."""
-    from demos._plot import COLOURS, pyplot
+    from harness.plot import COLOURS, pyplot
     plt = pyplot()
     directory.mkdir(parents=True, exist_ok=True)
     points = [p for p in results['points'] if p['phases'] and 'anatomy' not in p['phases'][0]]
     if not points:
         return []
     combos = sorted({(p['spec']['goals'], p['spec']['rate_hz'], p['size']) for p in points})
-    configs = [c for c in _harness.CONFIG_LABELS
+    configs = [c for c in load.CONFIG_LABELS
                if any(ph['config'] == c for p in points for ph in p['phases'])]
     paths = []
 
@@ -228,7 +226,7 @@ def plot(results: dict[str, Any], directory: Path) -> list[Path]:
                 xs, ys = _series(results, config, goals, rate, size, key)
                 if xs:
                     ax.plot(xs, [y * scale for y in ys], 'o-', color=COLOURS[config],
-                            label=_harness.CONFIG_LABELS[config])
+                            label=load.CONFIG_LABELS[config])
             ax.axvline(WRITER_FILTER_LIMIT, color='k', ls=':', lw=1)
             if log:
                 ax.set_yscale('log')
@@ -262,7 +260,7 @@ def plot(results: dict[str, Any], directory: Path) -> list[Path]:
                 ys = [c[key] / base for c in phase['clients']]
                 ax.scatter([spec['clients'] * (1 + offset * 0.04)] * len(ys), ys, s=12,
                            alpha=0.6, color=COLOURS[config],
-                           label=None if config in labelled else _harness.CONFIG_LABELS[config])
+                           label=None if config in labelled else load.CONFIG_LABELS[config])
                 labelled.add(config)
         ax.axvline(WRITER_FILTER_LIMIT, color='k', ls=':', lw=1)
         ax.axhline(1.0, color='#7f7f7f', lw=1)
@@ -304,7 +302,7 @@ def markdown_tables(results: dict[str, Any]) -> str:
             s = phase['summary']
             r = s.get('ratio_to_plain') or {}
             out.append(
-                f"| {_harness.CONFIG_LABELS[phase['config']]} | {s['own_per_client']:.0f} | "
+                f"| {load.CONFIG_LABELS[phase['config']]} | {s['own_per_client']:.0f} | "
                 f"{s['foreign_per_client']:.0f} | {s['bytes_per_client'] / 1e3:.0f} "
                 f"({s['bytes_per_client_min'] / 1e3:.0f}–"
                 f"{s['bytes_per_client_max'] / 1e3:.0f}) | "
@@ -324,7 +322,7 @@ def anatomy_table(phase: dict[str, Any]) -> str:
     """The byte breakdown of one captured client, as a Markdown table."""
     from benchmarks._capture import CATEGORIES
     own_payload = phase['clients'][0]['own'] * phase['summary']['feedback_message_bytes']
-    rows = [f"*{_harness.CONFIG_LABELS[phase['config']]}, first client: own feedback payload "
+    rows = [f"*{load.CONFIG_LABELS[phase['config']]}, first client: own feedback payload "
             f"{own_payload / 1e3:.1f} kB*\n",
             '| received | kB | packets | × own payload |', '|---|---:|---:|---:|']
     total = 0

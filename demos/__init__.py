@@ -1,13 +1,6 @@
-"""Demos of cft_action.
+"""Demos of cft_action, run from the repository root as modules.
 
-The multi-client load demo (``make demo``) is ``load_demo.py``; its private modules are shared
-with the benchmark sweep (``make bench``):
-
-- ``_harness.py``: starts the server and the client processes, runs a load phase and accounts it;
-- ``_server.py`` and ``_client.py``: the two process scripts (``_server.py`` is also the action
-  server of the benchmarks and the tests);
-- ``_proc.py``: the child-process wrapper and role dispatcher that demos, benchmarks and tests
-  share;
-- ``_netns.py``: one network namespace per client, so that bytes on the wire can be counted;
-- ``_plot.py``: the plots.
+- ``python -m demos.load_demo`` (``make demo``): the multi-client load demo, on :mod:`harness.load`
+  (shared with the benchmark sweep, ``make bench``);
+- ``python -m demos.parameter_events``: a node-filtered ParameterEventHandler against rclpy's.
 """

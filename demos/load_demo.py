@@ -12,7 +12,7 @@ Bytes are real network bytes when network namespaces can be made (root and iprou
 then has a namespace and an interface of its own. Otherwise they are estimated from the message
 counts, and the output says so.
 
-Usage: ``python demos/load_demo.py [--clients 8] [--goals 4] [--order 500] [--rate 100] ...``
+Usage: ``python -m demos.load_demo [--clients 8] [--goals 4] [--order 500] [--rate 100] ...``
 """
 
 from __future__ import annotations
@@ -24,10 +24,7 @@ import time
 from pathlib import Path
 from typing import Optional, Sequence
 
-# Run as a script: make the repository importable.
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-
-from demos import _harness  # noqa: E402
+from harness import load
 
 DEFAULT_OUTPUT = Path(__file__).resolve().parent.parent / 'demo-output'
 
@@ -43,7 +40,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--pad', type=int, default=0,
                         help='int32 elements added to each feedback message (2500: 10 kB)')
     parser.add_argument('--configs', default='rclpy,client,goals',
-                        help='comma-separated, from: ' + ', '.join(_harness.CONFIG_LABELS))
+                        help='comma-separated, from: ' + ', '.join(load.CONFIG_LABELS))
     parser.add_argument('--network', choices=('auto', 'netns', 'count'), default='auto',
                         help='bytes from per-client network namespaces (auto: when possible) or '
                              'estimated from message counts')
@@ -52,7 +49,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--no-plot', action='store_true', help='skip the PNG')
     args = parser.parse_args(argv)
     args.configs = [c.strip() for c in args.configs.split(',') if c.strip()]
-    unknown = set(args.configs) - set(_harness.CONFIG_LABELS)
+    unknown = set(args.configs) - set(load.CONFIG_LABELS)
     if unknown:
         parser.error(f'unknown configurations: {", ".join(sorted(unknown))}')
     return args
@@ -66,23 +63,23 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     def progress(line: str) -> None:
         print(f'[{time.monotonic() - started:6.1f} s] {line}', flush=True)
 
-    spec = _harness.LoadSpec(clients=args.clients, goals=args.goals, order=args.order,
+    spec = load.LoadSpec(clients=args.clients, goals=args.goals, order=args.order,
                              rate_hz=args.rate, pad=args.pad, network=args.network)
     progress(f'load: {spec.clients} client processes x {spec.goals} goals, {spec.order} '
              f'feedback messages per goal at {spec.rate_hz:g} Hz; configurations: '
-             + ', '.join(_harness.CONFIG_LABELS[c] for c in args.configs))
-    result = _harness.run_load(spec, args.configs, progress)
-    result['machine'] = _harness.environment_facts()
+             + ', '.join(load.CONFIG_LABELS[c] for c in args.configs))
+    result = load.run_load(spec, args.configs, progress)
+    result['machine'] = load.environment_facts()
     result['elapsed_s'] = time.monotonic() - started
     print()
-    print(_harness.format_table(result))
+    print(load.format_table(result))
     print()
     args.output.mkdir(parents=True, exist_ok=True)
     json_path = args.output / 'load_demo.json'
     json_path.write_text(json.dumps(result, indent=1))
     print(f'raw figures: {json_path}')
     if not args.no_plot:
-        from demos._plot import demo_figure
+        from harness.plot import demo_figure
         png = demo_figure(result, args.output / 'load_demo.png')
         print(f'plot: {png}')
     print(f'done in {time.monotonic() - started:.0f} s')

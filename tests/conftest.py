@@ -10,7 +10,7 @@ os.environ.pop('CFT_ACTION_FEEDBACK_FILTER', None)
 
 import pytest  # noqa: E402
 
-from tests.support import RosSession  # noqa: E402
+from harness.ros import RosSession  # noqa: E402
 
 
 @pytest.fixture

@@ -6,6 +6,7 @@ import subprocess
 import threading
 import time
 import uuid
+from pathlib import Path
 
 import pytest
 from action_msgs.msg import GoalStatus
@@ -19,8 +20,9 @@ import cft_action.client
 from cft_action import ActionClient, guard
 from cft_action.client import FINISHED_GOAL_GRACE
 from cft_action.filters import NEVER_MATCH
-from tests.helpers._polling import wait_until
-from tests.support import HELPERS, RosSession, action_server, helper_process, unique_name
+from harness.polling import wait_until
+from harness.ros import RosSession, unique_name
+from tests.support import action_server, helper_process
 
 PERIOD = 0.01  # 100 Hz feedback per goal
 
@@ -43,7 +45,7 @@ def server():
 
 
 def run_clients(server, action, mode, clients, goals, order):
-    children = [helper_process('fib_client.py', [action, mode, goals, order])
+    children = [helper_process('tests.helpers.fib_client', [action, mode, goals, order])
                 for _ in range(clients)]
     try:
         for child in children:
@@ -232,7 +234,7 @@ def slow_filter_updates(tmp_path_factory):
         pytest.skip('no C compiler to build the shim')
     shim = tmp_path_factory.mktemp('slow_filter_updates') / 'slow_filter_updates.so'
     subprocess.run([compiler, '-O2', '-shared', '-fPIC', '-o', str(shim),
-                    str(HELPERS / 'slow_filter_updates.c'), '-ldl'],
+                    str(Path(__file__).parent / 'helpers' / 'slow_filter_updates.c'), '-ldl'],
                    check=True, timeout=120, capture_output=True)
     env = guard.environment()
     env['LD_PRELOAD'] = f"{shim}:{env['LD_PRELOAD']}"

@@ -13,7 +13,8 @@ from rclpy.qos import QoSProfile
 from test_msgs.action import Fibonacci
 
 from cft_action import guard
-from tests.support import action_server, unique_name
+from harness.ros import unique_name
+from tests.support import action_server
 from tests.test_action_client import PERIOD, make_client, result_of, send
 
 ORDER = 30   # feedback messages of the one goal: three times rclpy's default depth of 10

@@ -14,7 +14,8 @@ from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient, guard
-from tests.support import action_server, unique_name
+from harness.ros import unique_name
+from tests.support import action_server
 from tests.test_action_client import result_of, round_trip, send
 
 

@@ -11,8 +11,9 @@ from std_msgs.msg import Float64, Int32, String
 
 from cft_action import (ContentFilterError, create_filtered_subscription, get_content_filter,
                         is_content_filter_supported, is_filtered, set_content_filter)
-from tests.helpers._polling import wait_until
-from tests.support import RosSession, helper_process, unique_name
+from harness.polling import wait_until
+from harness.ros import RosSession, unique_name
+from tests.support import helper_process
 
 QOS = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
 BURST = 30
@@ -22,7 +23,7 @@ WORDS = ('hello', 'world', 'hello world')  # as tests/helpers/publisher.py sends
 @pytest.fixture
 def publisher():
     prefix = '/' + unique_name('cft_sub')
-    child = helper_process('publisher.py', [prefix])
+    child = helper_process('tests.helpers.publisher', [prefix])
     try:
         yield prefix, child
     finally:
@@ -136,7 +137,7 @@ def test_filter_changed_while_executor_spins():
     spinner = threading.Thread(target=executor.spin, daemon=True)
     spinner.start()
     prefix = '/' + unique_name('cft_spin')
-    child = helper_process('publisher.py', [prefix])
+    child = helper_process('tests.helpers.publisher', [prefix])
     try:
         received = []
         lock = threading.Lock()
@@ -181,7 +182,7 @@ def test_writer_filtered_samples_are_counted_as_lost(ros, capfd):
     history of 1000 the same burst reports nothing lost. Each subscription is alone on the topic.
     """
     prefix = '/' + unique_name('cft_lost')
-    child = helper_process('publisher.py', [prefix, 10])
+    child = helper_process('tests.helpers.publisher', [prefix, 10])
     try:
         check_lost_counts(ros, prefix, child, capfd)
     finally:

@@ -31,12 +31,12 @@ import pytest
 os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 101)))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-from benchmarks import hazard  # noqa: E402
 from cft_action import guard  # noqa: E402
-from demos._proc import Proc  # noqa: E402
+from harness import crash, hazard  # noqa: E402
+from harness.proc import Proc, python_module  # noqa: E402
 
 HELPERS = Path(__file__).resolve().parent / 'helpers'
-SCENARIO = HELPERS / 'guard_scenario.py'
+SCENARIO = 'tests.helpers.guard_scenario'
 GUARD_LINE = '[cft_action guard'
 # What a guarded rclpy process reports: active on a known Fast DDS (2.14 on Jazzy, 3.2 on Kilted).
 KNOWN_ACTIVE = ('STATUS True active: libfastrtps.so.2.14', 'STATUS True active: libfastdds.so.3.2')
@@ -52,7 +52,7 @@ def cft_action_command() -> list[str]:
 
 def plain_env(**extra: str) -> dict[str, str]:
     """os.environ without the guard, in this session's domain, plus ``extra``."""
-    return hazard.plain_env(int(os.environ['ROS_DOMAIN_ID']), **extra)
+    return crash.plain_env(int(os.environ['ROS_DOMAIN_ID']), **extra)
 
 
 @pytest.fixture
@@ -250,10 +250,10 @@ def scenario_env(guarded: bool, name: str) -> dict[str, str]:
 
 def test_rclpy_publisher_runs_normally_under_the_guard(procs: list[Proc]) -> None:
     name = uuid.uuid4().hex[:8]
-    listener = start(procs, 'listener', [sys.executable, str(SCENARIO), 'listener', '10', '20'],
+    listener = start(procs, 'listener', python_module(SCENARIO, 'listener', 10, 20),
                      scenario_env(False, name))
     assert listener.wait_for('READY', 30.0), listener.tail()
-    talker = start(procs, 'talker', [sys.executable, str(SCENARIO), 'talker', '40'],
+    talker = start(procs, 'talker', python_module(SCENARIO, 'talker', 40),
                    scenario_env(True, name))
     # Its exit is not asserted: one CI run saw this talker hang in rclpy shutdown after reporting
     # (rc None after 40 s); that is recorded as an open question, not hidden by a retry.
@@ -273,7 +273,7 @@ FEEDBACK_PERIOD = 0.0005
 
 
 def churn_scenario(guarded: bool) -> dict:
-    """Fast-DDS issue 4878's churn: the ``update`` cell of ``benchmarks/hazard.py``.
+    """Fast-DDS issue 4878's churn: the ``update`` cell of :mod:`harness.hazard`.
 
     A server (guarded or not) publishing feedback every 0.5 ms to a goal that an ordinary client
     keeps running, and a client that changes its feedback filter every 20 ms, 300 times. Returns
@@ -305,6 +305,6 @@ def test_churn_without_the_guard_is_evidence_only(capsys: pytest.CaptureFixture[
     message = (f'unguarded churn ({CHURN_UPDATES} filter updates at most): '
                f'{hazard.describe(outcome)}')
     if outcome.get('backtrace'):
-        message += f' at {hazard.crash_site(outcome)}'
+        message += f' at {crash.crash_site(outcome)}'
     with capsys.disabled():
         print(f'\n[evidence] {message}')

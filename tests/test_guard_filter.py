@@ -30,7 +30,8 @@ from test_msgs.action import Fibonacci
 from cft_action import create_filtered_subscription, guard, set_content_filter, sql
 from cft_action.filters import MATCH_ALL, NEVER_MATCH, any_of, uuid_prefix_term
 from cft_action.topic_tools import message_schema
-from tests.support import helper_process, unique_name
+from harness.ros import unique_name
+from tests.support import helper_process
 
 FEEDBACK = Fibonacci.Impl.FeedbackMessage
 SCHEMA = message_schema(FEEDBACK)
@@ -218,7 +219,7 @@ def publisher() -> Iterator:
     started = []
 
     def start(action: str, **settings: str):
-        child = helper_process('feedback_publisher.py', [action],
+        child = helper_process('tests.helpers.feedback_publisher', [action],
                                env=guard.environment({**os.environ, **settings}))
         started.append(child)
         return child

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import pytest
 
-from demos import _harness
+from harness import load
 
 CLIENTS, GOALS, ORDER = 3, 2, 20
 
@@ -18,9 +18,9 @@ CLIENTS, GOALS, ORDER = 3, 2, 20
 @pytest.fixture(scope='module')
 def result():
     """One run, plain rclpy then cft client mode; shared by the tests of this module."""
-    spec = _harness.LoadSpec(clients=CLIENTS, goals=GOALS, order=ORDER, network='count',
+    spec = load.LoadSpec(clients=CLIENTS, goals=GOALS, order=ORDER, network='count',
                              drain_timeout=20)
-    return _harness.run_load(spec, ['rclpy', 'client'], progress=lambda line: None)
+    return load.run_load(spec, ['rclpy', 'client'], progress=lambda line: None)
 
 
 def phase(result, config):
@@ -65,7 +65,7 @@ def test_client_mode_takes_only_its_own_feedback(result):
 
 
 def test_estimated_bytes_follow_the_counts(result):
-    size = _harness.feedback_size(0)
+    size = load.feedback_size(0)
     assert result['bytes_method'] == 'estimated'
     for p in result['phases']:
         for client in p['clients']:

@@ -11,7 +11,8 @@ import cft_action.parameter_events
 from cft_action import ContentFilterError, guard, is_filtered
 from cft_action.parameter_events import (ALL_NODES, NO_NODES, ParameterEventHandler,
                                          node_filter)
-from tests.support import helper_process, unique_name
+from harness.ros import unique_name
+from tests.support import helper_process
 
 BURST = 20
 SYNC_TIMEOUT = 15.0
@@ -54,7 +55,7 @@ def start_nodes():
     children = []
 
     def start(*names):
-        child = helper_process('param_nodes.py', names, env=guard.environment())
+        child = helper_process('harness.param_nodes', names, env=guard.environment())
         children.append(child)
         return child
 

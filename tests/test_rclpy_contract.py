@@ -2,7 +2,7 @@
 
 Each test pins a behaviour that rclpy's Jazzy tests (``rclpy/test/test_action_client.py`` and
 ``rclpy/test/test_parameter_event_handler.py``) pin with a mock server inside the test's own node.
-Here the action server is ``demos/_server.py`` in a process of its own, foreign feedback comes from
+Here the action server is ``harness/server.py`` in a process of its own, foreign feedback comes from
 ``helpers/feedback_publisher.py``, parameter events from ``helpers/param_nodes.py``, and every
 ActionClient test runs in every feedback filter mode.
 """
@@ -22,7 +22,8 @@ from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient, guard, ParameterEventHandler
 from cft_action.goal_filter import MODES
-from tests.support import action_server, helper_process, RosSession, unique_name
+from harness.ros import RosSession, unique_name
+from tests.support import action_server, helper_process
 from tests.test_action_client import make_client, PERIOD, result_of, send
 
 #: The constructor's QoS arguments, as rclpy's test passes them all.
@@ -51,7 +52,7 @@ def server():
 @pytest.fixture(scope='module')
 def publisher(server):
     """A second feedback writer on the server's topic, for goal UUIDs of the test's choosing."""
-    child = helper_process('feedback_publisher.py', [server])
+    child = helper_process('tests.helpers.feedback_publisher', [server])
     try:
         yield child
     finally:
@@ -234,7 +235,7 @@ def test_feedback_for_no_goal_of_this_client_is_not_delivered(ros, clients, serv
 def target():
     """A node in another process whose parameters change on command; yields (name, process)."""
     name = '/' + unique_name('cft_pe') + '/target'
-    child = helper_process('param_nodes.py', [name], env=guard.environment())
+    child = helper_process('harness.param_nodes', [name], env=guard.environment())
     try:
         yield name, child
         assert child.poll() is None, f'param_nodes.py died\n{child.tail()}'

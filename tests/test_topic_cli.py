@@ -28,8 +28,9 @@ from test_msgs.msg import Arrays, BasicTypes, UnboundedSequences
 from cft_action import ContentFilterError, create_filtered_subscription, sql
 from cft_action.filters import dds_literals
 from cft_action.topic_tools import message_schema, message_to_yaml
-from demos._proc import Proc
-from tests.support import helper_process, unique_name
+from harness.proc import Proc
+from harness.ros import unique_name
+from tests.support import helper_process
 
 CLI = [sys.executable, '-m', 'cft_action.cli']
 # Runs the CLI as if the rmw implementation had no content filtering: the code path that a Jazzy
@@ -115,7 +116,7 @@ def run_cli(*args: str, command: Sequence[str] = CLI, timeout: float = 30) -> Cl
 @pytest.fixture
 def publisher():
     prefix = '/' + unique_name('cft_cli')
-    child = helper_process('publisher.py', [prefix])
+    child = helper_process('tests.helpers.publisher', [prefix])
     try:
         yield prefix, child
     finally:

@@ -1,7 +1,8 @@
 """Publishes action feedback messages with given goal UUIDs; used by the guard's filter tests.
 
-Usage: feedback_publisher.py ACTION: a plain publisher of the action's FeedbackMessage type on
-``ACTION/_action/feedback`` (what an rclpy ActionServer's feedback writer is), reliable, keep all.
+Usage: ``python -m tests.helpers.feedback_publisher ACTION``: a plain publisher of the action's
+FeedbackMessage type on ``ACTION/_action/feedback`` (what an rclpy ActionServer's feedback writer
+is), reliable, keep all.
 Commands on stdin, one per line:
   wait N          wait until exactly N subscriptions matched; replies MATCHED or TIMEOUT
   pub K UUIDHEX   publish feedback [K] for the goal UUID (32 hex digits); no reply
@@ -16,7 +17,7 @@ from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from test_msgs.action import Fibonacci
 
-from _polling import wait_until
+from harness.polling import wait_until
 
 from cft_action import guard
 

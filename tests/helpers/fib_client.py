@@ -1,6 +1,6 @@
 """A client process for the ActionClient tests: sends goals on command and reports what arrived.
 
-Usage: fib_client.py ACTION MODE GOALS ORDER
+Usage: ``python -m tests.helpers.fib_client ACTION MODE GOALS ORDER``
 MODE is a cft_action feedback_filter mode. Before ``READY`` the client completes one goal of order
 0 (no feedback): wait_for_server only sees the server in the graph, while this round trip proves
 that the endpoints matched; goals sent too early were lost here. Then the line ``go`` sends GOALS

@@ -1,11 +1,13 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 """Processes for tests/test_guard.py: each role runs in its own process, started by the test.
 
-    guard_scenario.py talker COUNT              publish COUNT std_msgs/String, report the guard
-    guard_scenario.py listener EXPECT TIMEOUT   count std_msgs/String until EXPECT or TIMEOUT s
+    python -m tests.helpers.guard_scenario talker COUNT
+        publish COUNT std_msgs/String, report the guard
+    python -m tests.helpers.guard_scenario listener EXPECT TIMEOUT
+        count std_msgs/String until EXPECT or TIMEOUT s
 
 Every wait is bounded. The topic name comes from GUARD_TOPIC. Lines the test reads start with a
-capitalised keyword (READY, STATUS, ...). The churn scenario is ``benchmarks/hazard.py``'s.
+capitalised keyword (READY, STATUS, ...). The churn scenario is :mod:`harness.hazard`'s.
 """
 
 from __future__ import annotations
@@ -13,13 +15,11 @@ from __future__ import annotations
 import os
 import sys
 import time
-from pathlib import Path
 
 import rclpy
 from rclpy.node import Node
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))  # run as a script: the repository
-from demos._proc import run_role  # noqa: E402
+from harness.proc import run_role
 
 TOPIC = os.environ.get('GUARD_TOPIC', 'guard_chatter')
 

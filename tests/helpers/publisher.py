@@ -1,6 +1,7 @@
 """Publishes int, float and string samples on command; used by the filtered-subscription tests.
 
-Usage: publisher.py PREFIX [DEPTH]: reliable, keep-last DEPTH (default 1000). Commands on stdin, one per line:
+Usage: ``python -m tests.helpers.publisher PREFIX [DEPTH]``: reliable, keep-last DEPTH (default
+1000). Commands on stdin, one per line:
   wait T N   wait until topic T (ints, floats or strings) has exactly N matched subscriptions;
              replies MATCHED or TIMEOUT
   burst N [PERIOD]
@@ -15,7 +16,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, Int32, String
 
-from _polling import wait_until
+from harness.polling import wait_until
 
 WORDS = ('hello', 'world', 'hello world')
 

@@ -1,10 +1,10 @@
 """A load client process: one action client that sends goals on command and accounts what arrives.
 
-Usage: ``_client.py ACTION CONFIG GOALS ORDER DEPTH``
+Usage: ``python -m harness.client ACTION CONFIG GOALS ORDER DEPTH``
 
 CONFIG is ``rclpy`` (plain :class:`rclpy.action.ActionClient`), ``client`` or ``goals``
 (:class:`cft_action.ActionClient` in that mode), or ``upstream`` (the emulation of the upstream
-design in ``benchmarks/_upstream.py``). Every queue is DEPTH deep.
+design in :mod:`harness.upstream`). Every queue is DEPTH deep.
 
 Before ``READY`` the client completes one goal of order 0 (no feedback): ``wait_for_server`` only
 sees the server in the graph, while this round trip proves that the endpoints matched.
@@ -41,7 +41,6 @@ import sys
 import threading
 import time
 import uuid
-from pathlib import Path
 from typing import Any, Callable
 
 import rclpy
@@ -51,9 +50,6 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
-
-# Run as a script: make the repository importable for the upstream emulation.
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 CONFIGS = ('rclpy', 'client', 'goals', 'upstream')
 #: Seconds before the probe goal, or its result request, is sent again.
@@ -91,7 +87,7 @@ def make_client(node: Node, config: str, action: str, qos: QoSProfile) -> Any:
         from rclpy.action import ActionClient as base
         kwargs: dict[str, Any] = {}
     elif config == 'upstream':
-        from benchmarks._upstream import UpstreamEquivalentActionClient as base
+        from harness.upstream import UpstreamEquivalentActionClient as base
         kwargs = {}
     elif config in ('client', 'goals'):
         from cft_action import ActionClient as base

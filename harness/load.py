@@ -1,7 +1,8 @@
 """The load harness shared by ``make demo`` and ``make bench``: processes, phases and accounting.
 
-One run starts one action server (``_server.py``, under the server guard) and then, for each
-configuration in turn, N fresh client processes (``_client.py``) that each send M goals at once.
+One run starts one action server (:mod:`harness.server`, under the server guard) and then, for
+each configuration in turn, N fresh client processes (:mod:`harness.client`) that each send M
+goals at once.
 A phase goes:
 
 1. start the clients; each proves with an order-0 goal that its endpoints matched (``READY``);
@@ -13,8 +14,8 @@ A phase goes:
 5. snapshot the counters again, collect every client's ``RESULT`` and stop the clients.
 
 Bytes are the ``rx_bytes`` of each client's own network interface when network namespaces can be
-made (root, iproute2: see ``_netns.py``); otherwise they are estimated as feedback messages taken x
-the serialized size of one feedback message, and the result says so.
+made (root, iproute2: see :mod:`harness.netns`); otherwise they are estimated as feedback messages
+taken x the serialized size of one feedback message, and the result says so.
 """
 
 from __future__ import annotations
@@ -24,16 +25,12 @@ import os
 import platform
 import random
 import statistics
-import sys
 import time
-from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
 from cft_action.client import FINISHED_GOAL_GRACE
-from demos import _netns
-from demos._proc import Proc
-
-HERE = Path(__file__).resolve().parent
+from harness import netns
+from harness.proc import Proc, python_module
 
 #: The configurations, in the order they run; ``rclpy`` (plain) first, since ratios refer to it.
 CONFIG_LABELS = {
@@ -130,9 +127,9 @@ class LoadRun:
         self.progress = progress
         self.action = f'/cft_load_{os.urandom(4).hex()}'
         self.depth = queue_depth(spec)
-        self.topology: Optional[_netns.Topology] = None
+        self.topology: Optional[netns.Topology] = None
         self.network_note = ''
-        reason = _netns.unavailable_reason() if spec.network in ('auto', 'netns') else \
+        reason = netns.unavailable_reason() if spec.network in ('auto', 'netns') else \
             'network counting not requested'
         if reason is not None and spec.network == 'netns':
             raise RuntimeError(f'network namespaces are not available: {reason}')
@@ -141,9 +138,9 @@ class LoadRun:
             str(random.randint(1, 101))
         self.env.pop('CFT_ACTION_FEEDBACK_FILTER', None)  # each phase sets its own mode
         if reason is None:
-            _netns.remove_stale()
-            self.topology = _netns.Topology()
-            self.env.update(_netns.ENVIRONMENT)
+            netns.remove_stale()
+            self.topology = netns.Topology()
+            self.env.update(netns.ENVIRONMENT)
             self.bytes_method = 'netns'
             self.network_note = ('bytes: rx_bytes of each client\'s own veth interface (network '
                                  'namespace per client, FASTDDS_BUILTIN_TRANSPORTS=UDPv4)')
@@ -153,9 +150,8 @@ class LoadRun:
             self.network_note = (f'bytes ESTIMATED as feedback messages taken x serialized size '
                                  f'({feedback_size(spec.pad)} B), no headers, status or discovery: '
                                  f'no network namespaces ({reason})')
-        argv = [sys.executable, '-u', str(HERE / '_server.py'), self.action,
-                str(1.0 / spec.rate_hz), '--pad', str(spec.pad), '--depth', str(self.depth),
-                '--result-timeout', str(RESULT_TIMEOUT_S)]
+        argv = python_module('harness.server', self.action, 1.0 / spec.rate_hz, '--pad', spec.pad,
+                             '--depth', self.depth, '--result-timeout', RESULT_TIMEOUT_S)
         if self.topology:
             argv = self.topology.command(self.topology.server, argv)
         self.server = Proc('server', argv, guard.environment({**self.env, **spec.server_env}))
@@ -188,8 +184,8 @@ class LoadRun:
         spec = self.spec
         clients = []
         for i in range(spec.clients):
-            argv = [sys.executable, '-u', str(HERE / '_client.py'), self.action, config,
-                    str(spec.goals), str(spec.order), str(self.depth)]
+            argv = python_module('harness.client', self.action, config, spec.goals, spec.order,
+                                 self.depth)
             if self.topology:
                 argv = self.topology.command(self.topology.add_client(), argv)
             clients.append(Proc(f'{config} client {i}', argv, self.env))
@@ -198,7 +194,7 @@ class LoadRun:
     def _network(self, clients: list[Proc]) -> list[Optional[dict[str, int]]]:
         if not self.topology:
             return [None] * len(clients)
-        return [_netns.interface_counters(c.pid) for c in clients]
+        return [netns.interface_counters(c.pid) for c in clients]
 
     def _wait_for_goals(self, before: dict[str, Any]) -> dict[str, Any]:
         """Wait until the server accepted and finished every goal of the phase."""

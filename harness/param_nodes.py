@@ -1,6 +1,7 @@
-"""Nodes whose parameters change on command; used by the parameter event handler tests.
+"""Nodes whose parameters change on command, for the parameter event tests and benchmark.
 
-Usage: param_nodes.py NODE [NODE ...], each NODE a fully qualified name such as ``/ns/name``.
+Usage: ``python -m harness.param_nodes NODE [NODE ...]``, each NODE a fully qualified name such as
+``/ns/name``.
 Every node declares the integer parameters ``value`` and ``sync`` (0). Commands on stdin, one per
 line:
   set NODE PARAM N   set PARAM of NODE to 1..N, one parameter event each; replies SET NODE PARAM N
@@ -21,7 +22,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 
-from _polling import TIMEOUT, wait_until
+from harness.polling import TIMEOUT, wait_until
 
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from demos._harness import CONFIG_LABELS
+from harness.load import CONFIG_LABELS
 
 #: One colour per configuration, the same in every plot.
 COLOURS = {'rclpy': '#7f7f7f', 'client': '#1f77b4', 'goals': '#2ca02c', 'upstream': '#d62728'}

@@ -1,7 +1,7 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 """The Fibonacci action server of every demo, benchmark and test, in a process of its own.
 
-Usage: ``_server.py ACTION PERIOD_S [--pad N] [--depth N|all] [--result-timeout S]
+Usage: ``python -m harness.server ACTION PERIOD_S [--pad N] [--depth N|all] [--result-timeout S]
 [--stats-every S] [--late-feedback S]``
 
 Goal ``order`` is the number of feedback messages the goal gets (a negative order is rejected;

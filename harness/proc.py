@@ -6,6 +6,10 @@ capitalised keyword (``READY``, ``STATS {...}``, ``RESULT ...``), reads commands
 ends when stdin closes. :class:`Proc` starts one, collects its merged stdout and stderr on a
 thread, and stops it for sure: every wait is bounded, and :meth:`Proc.stop` escalates to SIGKILL.
 :func:`run_role` is the other side: the entry point of a script whose roles run as such processes.
+
+A module of this repository runs in a child as ``python -m`` (:func:`python_module`): :class:`Proc`
+puts the repository (:data:`ROOT`) first on every child's ``PYTHONPATH``, so the child imports
+``harness``, ``demos``, ``benchmarks`` and ``tests`` whatever its working directory.
 """
 
 from __future__ import annotations
@@ -16,10 +20,30 @@ import os
 import resource
 import signal
 import subprocess
+import sys
 import threading
 import time
 import typing
-from typing import Any, Callable, Optional, Sequence
+from pathlib import Path
+from typing import Any, Callable, Mapping, Optional, Sequence
+
+#: The repository: the directory that holds this package, ``demos``, ``benchmarks`` and ``tests``.
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def python_module(module: str, *args: object) -> list[str]:
+    """The command line ``python -u -m MODULE ARGS...`` with this interpreter.
+
+    ``module`` is a dotted name under :data:`ROOT` (``harness.server``,
+    ``tests.helpers.publisher``); a :class:`Proc` finds it through ``PYTHONPATH``.
+    """
+    return [sys.executable, '-u', '-m', module, *map(str, args)]
+
+
+def root_on_path(env: Mapping[str, str]) -> dict[str, str]:
+    """``env`` with :data:`ROOT` first on ``PYTHONPATH`` (once)."""
+    paths = [p for p in env.get('PYTHONPATH', '').split(os.pathsep) if p and p != str(ROOT)]
+    return {**env, 'PYTHONPATH': os.pathsep.join([str(ROOT), *paths])}
 
 
 class Proc:
@@ -27,7 +51,7 @@ class Proc:
 
     def __init__(self, name: str, argv: Sequence[str], env: dict[str, str], *,
                  cwd: Optional[str] = None, core: bool = False) -> None:
-        """Start ``argv`` in a session of its own.
+        """Start ``argv`` in a session of its own, with ``env`` and :data:`ROOT` on its path.
 
         :param name: what messages call it.
         :param core: allow a core dump (``RLIMIT_CORE`` unlimited), for a crash's backtrace.
@@ -43,9 +67,10 @@ class Proc:
             resource.setrlimit(resource.RLIMIT_CORE,
                                (resource.RLIM_INFINITY, resource.RLIM_INFINITY))
 
-        self.popen = subprocess.Popen(list(argv), env=env, cwd=cwd, stdin=subprocess.PIPE,
-                                      stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                      text=True, errors='replace', start_new_session=True,
+        self.popen = subprocess.Popen(list(argv), env=root_on_path(env), cwd=cwd,
+                                      stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                      stderr=subprocess.STDOUT, text=True, errors='replace',
+                                      start_new_session=True,
                                       preexec_fn=allow_core if core else None)
         self.pid = self.popen.pid
         self._reader = threading.Thread(target=self._read, daemon=True)
