@@ -27,8 +27,10 @@ GUID_PREFIX_LEN = 12
 
 #: How long a probe request may go unanswered before it is sent again: a server that has not yet
 #: matched the client's request writer drops the request, and one that has not matched its
-#: response reader drops the reply.
-PROBE_RESEND_S = 0.5
+#: response reader drops the reply. The client sees the server's endpoints at once, the server
+#: sees the client's a discovery round later, so the first request is often dropped; a goal
+#: request waits for the reply, so the resend is short. A repeated request is harmless.
+PROBE_RESEND_S = 0.1
 
 
 def participant_of(endpoint_gid: Any) -> bytes:
