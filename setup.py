@@ -1,11 +1,14 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
-"""Builds the server guard, ``cft_action/_guard.c``, into the package at install time.
+"""Builds the package's two C shared libraries at install time.
 
-All metadata is in ``pyproject.toml``; this file only adds the C shared library. It is built as a
+- ``_cftguard``, the server guard (``cft_action/_guard.c``), ``LD_PRELOAD``-ed into servers;
+- ``_cftreader``, the reader lock (``cft_action/_reader_lock.c``), loaded with ctypes by
+  ``cft_action._rcl`` into every process that changes a filter.
+
+All metadata is in ``pyproject.toml``; this file only adds the C shared libraries. Each is built as a
 setuptools ``Extension`` so that ``pip install .`` puts it into the installed package and
-``pip install -e .`` builds it in place, next to ``cft_action/guard.py`` (which finds it with
-:func:`cft_action.guard.library_path`). It is never imported: it has no Python module init and does
-not link against libpython, so it can be ``LD_PRELOAD``-ed into any process.
+``pip install -e .`` builds it in place, next to ``cft_action/guard.py``. Neither is imported: they have no Python module init and do not
+link against libpython.
 """
 
 from setuptools import Extension, setup
@@ -20,6 +23,12 @@ setup(
             # -fexceptions: a C++ exception thrown by Fast DDS through a wrapper must still run
             # the wrapper's unlock (a cleanup attribute), or the writer's stripe stays locked.
             extra_compile_args=['-O2', '-fvisibility=hidden', '-fexceptions', '-Wall'],
+        ),
+        Extension(
+            'cft_action._cftreader',
+            sources=['cft_action/_reader_lock.c'],
+            libraries=['dl', 'pthread'],
+            extra_compile_args=['-O2', '-fvisibility=hidden', '-Wall'],
         ),
     ],
 )

@@ -19,7 +19,10 @@ from typing import Any, Callable, Optional, Sequence
 # Importing rclpy's C extension loads librcl and friends from the installed wheels; we then bind
 # to those very copies instead of guessing paths. A failed take raises its RCLError, as rclpy's.
 from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy import get_rmw_implementation_identifier
+from rclpy.logging import get_logger
 
+from cft_action._native import extension_path
 from cft_action.errors import BindingUnavailable, ContentFilterError
 
 RCL_RET_OK = 0
@@ -110,6 +113,8 @@ def _load(soname: str) -> ctypes.CDLL:
 _rcutils = _load('librcutils.so')
 _rcl = _load('librcl.so')
 _rcl_action = _load('librcl_action.so')
+# cft_action/_reader_lock.c: serializes a reader's own filter evaluation with a filter change.
+_reader_lock = _load(extension_path('_cftreader') or '_cftreader (not built: pip install .)')
 
 _rcutils_get_error_string = _rcutils.rcutils_get_error_string
 _rcutils_get_error_string.argtypes = []
@@ -187,6 +192,9 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'rcl_take_response_with_info':
         (_rcl, _rcl_ret_t, [_void_p, ctypes.POINTER(_ServiceInfo), _void_p],
          _take_failed_is_empty),
+    'cft_reader_lock_install': (_reader_lock, ctypes.c_int, [], None),
+    'cft_reader_lock_error': (_reader_lock, ctypes.c_char_p, [], None),
+    'cft_reader_lock_count': (_reader_lock, ctypes.c_ulong, [ctypes.c_int], None),
     # The Python C API, to reach the C functions that rosidl generates for every message type.
     'PyCapsule_GetName': (ctypes.pythonapi, ctypes.c_char_p, [ctypes.py_object], None),
     'PyCapsule_GetPointer':
@@ -214,10 +222,31 @@ def _check_subscription(subscription_ptr: int) -> None:
                                  function='rcl_subscription_is_valid', rcl_error=error)
 
 
+def reader_lock_status() -> str:
+    """Install the reader lock (cft_action/_reader_lock.c) if it is not yet; why not, or ``''``.
+
+    Without it, Fast DDS 2.14 can crash a process that changes a filter while its reader evaluates
+    that filter in a receive thread.
+    """
+    if _lib.cft_reader_lock_install() == 0:
+        return ''
+    return (_lib.cft_reader_lock_error() or b'').decode('utf-8', 'replace')
+
+
+def reader_lock_counts() -> tuple[int, int]:
+    """``(evaluations, replacements)``: filter evaluations by readers, and filter swaps, locked."""
+    return _lib.cft_reader_lock_count(0), _lib.cft_reader_lock_count(1)
+
+
 def set_content_filter(subscription_ptr: int, expression: str,
                        parameters: Sequence[str] = ()) -> None:
-    """Set ``expression`` with ``parameters`` (already DDS literals) on an rcl subscription."""
+    """Set ``expression`` with ``parameters`` (already DDS literals) on an rcl subscription.
+
+    The reader lock is installed first, so that the reader's own evaluations of the filter do not
+    run while Fast DDS replaces it; if it cannot be, a warning says why, once per process.
+    """
     _check_subscription(subscription_ptr)
+    _warn_once_without_reader_lock()
     encoded = [p.encode() for p in parameters]
     argv = (ctypes.c_char_p * max(1, len(encoded)))(*encoded)
     options = _lib.rcl_get_zero_initialized_subscription_content_filter_options()
@@ -227,6 +256,21 @@ def set_content_filter(subscription_ptr: int, expression: str,
         _lib.rcl_subscription_set_content_filter(subscription_ptr, ctypes.byref(options))
     finally:
         _lib.rcl_subscription_content_filter_options_fini(subscription_ptr, ctypes.byref(options))
+
+
+_reader_lock_warned = False
+
+
+def _warn_once_without_reader_lock() -> None:
+    global _reader_lock_warned
+    if _reader_lock_warned or 'fastrtps' not in get_rmw_implementation_identifier():
+        return  # the hazard is Fast DDS's
+    reason = reader_lock_status()
+    if reason:
+        _reader_lock_warned = True
+        get_logger('cft_action').warning(
+            'filter changes are not serialized with the reader\'s own filter evaluation, which '
+            f'can crash this process under Fast DDS: {reason}')
 
 
 def get_content_filter(subscription_ptr: int) -> tuple[str, list[str]]:

@@ -22,13 +22,11 @@ Set ``CFT_GUARD_DEBUG=1`` to see what it does.
 from __future__ import annotations
 
 import ctypes
-import importlib.machinery
-import importlib.util
 import os
 import re
-from pathlib import Path
 from typing import Mapping, Optional
 
+from cft_action._native import extension_path
 from cft_action.errors import CftActionError
 
 __all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts',
@@ -50,16 +48,9 @@ def library_path() -> str:
 
     :raises GuardUnavailable: when the package was installed without building it.
     """
-    here = Path(__file__).resolve().parent
-    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
-        candidate = here / f'{_MODULE}{suffix}'
-        if candidate.is_file():
-            return str(candidate)
-    # An install layout that keeps extension modules elsewhere: ask the import system where the
-    # module is, without importing it (it is not a Python module, only a shared library).
-    spec = importlib.util.find_spec(f'{__package__ or "cft_action"}.{_MODULE}')
-    if spec is not None and spec.origin and os.path.isfile(spec.origin):
-        return os.path.abspath(spec.origin)
+    path = extension_path(_MODULE)
+    if path is not None:
+        return path
     raise GuardUnavailable(
         f'the guard library ({_MODULE}*.so) was not found next to {__file__}; '
         'reinstall cft-action with a C compiler available (pip install .)')

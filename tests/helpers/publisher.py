@@ -6,6 +6,8 @@ Usage: ``python -m tests.helpers.publisher PREFIX [DEPTH]``: reliable, keep-last
              replies MATCHED or TIMEOUT
   burst N [PERIOD]
              publish samples 0..N-1 on every topic, PERIOD seconds apart; replies SENT N
+  flood S    publish ints 0, 1, ... as fast as it can for S seconds (a 1 ms pause every 50
+             samples lets discovery run); replies SENT N
 """
 
 import sys
@@ -50,6 +52,15 @@ def main() -> None:
                 if period:
                     time.sleep(float(period))
             print(f'SENT {count}', flush=True)
+        elif command == 'flood':
+            publisher, make = publishers['ints']
+            end, sent = time.monotonic() + float(argument), 0
+            while time.monotonic() < end:
+                publisher.publish(make(sent))
+                sent += 1
+                if sent % 50 == 0:
+                    time.sleep(0.001)
+            print(f'SENT {sent}', flush=True)
     node.destroy_node()
     rclpy.shutdown()
 

@@ -1,0 +1,25 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""Where the package's C shared libraries are: built by setup.py, never imported as modules."""
+
+from __future__ import annotations
+
+import importlib.machinery
+import importlib.util
+import os
+from pathlib import Path
+from typing import Optional
+
+
+def extension_path(module: str) -> Optional[str]:
+    """The absolute path of the shared library ``cft_action.<module>``, or None if not built."""
+    here = Path(__file__).resolve().parent
+    for suffix in importlib.machinery.EXTENSION_SUFFIXES:
+        candidate = here / f'{module}{suffix}'
+        if candidate.is_file():
+            return str(candidate)
+    # An install layout that keeps extension modules elsewhere: ask the import system where the
+    # module is, without importing it (it is a shared library, not a Python module).
+    spec = importlib.util.find_spec(f'{__package__ or "cft_action"}.{module}')
+    if spec is not None and spec.origin and os.path.isfile(spec.origin):
+        return os.path.abspath(spec.origin)
+    return None

@@ -1,0 +1,171 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The reader-side twin of the server guard, for the process that changes its filters.
+//
+// A Fast DDS 2.14 DataReader evaluates its filter itself, in a receive thread, for every sample
+// whose writer did not filter for the reader's current filter: right after each filter change,
+// until the writer has the change. ContentFilteredTopicImpl::set_expression_parameters meanwhile
+// has DDSFilterFactory::create_content_filter build a new expression and clear the old one, with
+// no lock against that evaluation: the receive thread then evaluates a cleared expression and the
+// process dies (SIGSEGV in TypeDescriptor::get_element_type under DDSFilterExpression::evaluate,
+// under ContentFilteredTopicImpl::is_relevant). Measured: a subscription that changed its filter
+// in a loop while a publisher in another process sent at full rate died within seconds.
+//
+// This library, loaded with ctypes into the client's process (not preloaded), replaces two slots
+// of libfastrtps's vtables at run time: ContentFilteredTopicImpl::is_relevant (both its entry and
+// the thunk through IReaderDataFilter) takes a read lock, and DDSFilterFactory::
+// create_content_filter, where the reader's expression is swapped, takes the write lock. The
+// slots are found by their current value, the exported address of the member, so no object layout
+// is assumed. Readers that hold their RTPSReader's mutex wait only for the swap itself, which
+// takes no reader mutex, so the lock order cannot cycle.
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <link.h>
+#include <pthread.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <string.h>
+#include <sys/mman.h>
+#include <unistd.h>
+
+#define EXPORT __attribute__((visibility("default")))
+
+#define FASTRTPS_SONAME "libfastrtps.so.2.14"
+#define CFT_VTABLE "_ZTVN8eprosima7fastdds3dds24ContentFilteredTopicImplE"
+#define IS_RELEVANT_ARGS "11is_relevantERKNS_8fastrtps4rtps13CacheChange_tERKNS4_6GUID_tE"
+#define IS_RELEVANT "_ZNK8eprosima7fastdds3dds24ContentFilteredTopicImpl" IS_RELEVANT_ARGS
+#define IS_RELEVANT_THUNK "_ZThn16_NK8eprosima7fastdds3dds24ContentFilteredTopicImpl" IS_RELEVANT_ARGS
+#define FACTORY_VTABLE "_ZTVN8eprosima7fastdds3dds12DDSSQLFilter16DDSFilterFactoryE"
+#define CREATE_FILTER                                                                          \
+  "_ZN8eprosima7fastdds3dds12DDSSQLFilter16DDSFilterFactory21create_content_filterEPKcS5_PKN" \
+  "S1_13TopicDataTypeES5_RKNS1_23LoanableTypedCollectionIS5_St17integral_constantIbLb1EEEERP" \
+  "NS1_14IContentFilterE"
+
+typedef bool (*is_relevant_fn)(const void *self, const void *change, const void *reader_guid);
+// ReturnCode_t is a trivially copyable class of one uint32_t: returned in a register.
+typedef uint32_t (*create_fn)(void *self, const char *filter_class, const char *type_name,
+                              const void *data_type, const char *expression,
+                              const void *parameters, void **filter_instance);
+
+static pthread_rwlock_t filters_lock = PTHREAD_RWLOCK_INITIALIZER;
+static __thread int holds_write_lock;  // create_content_filter may re-enter on this thread
+static is_relevant_fn real_is_relevant, real_is_relevant_thunk;
+static create_fn real_create;
+static unsigned long evaluations, replacements;  // under the lock; read relaxed
+static pthread_mutex_t install_mutex = PTHREAD_MUTEX_INITIALIZER;
+static int install_status = 1;  // 1: not tried, 0: installed, < 0: failed
+static char install_error[256];
+
+static bool read_locked(is_relevant_fn real, const void *self, const void *change,
+                        const void *guid) {
+  if (holds_write_lock) return real(self, change, guid);
+  pthread_rwlock_rdlock(&filters_lock);
+  __atomic_fetch_add(&evaluations, 1, __ATOMIC_RELAXED);
+  bool relevant = real(self, change, guid);
+  pthread_rwlock_unlock(&filters_lock);
+  return relevant;
+}
+
+static bool locked_is_relevant(const void *self, const void *change, const void *guid) {
+  return read_locked(real_is_relevant, self, change, guid);
+}
+
+static bool locked_is_relevant_thunk(const void *self, const void *change, const void *guid) {
+  return read_locked(real_is_relevant_thunk, self, change, guid);
+}
+
+static uint32_t locked_create(void *self, const char *filter_class, const char *type_name,
+                              const void *data_type, const char *expression,
+                              const void *parameters, void **filter_instance) {
+  if (holds_write_lock)
+    return real_create(self, filter_class, type_name, data_type, expression, parameters,
+                       filter_instance);
+  pthread_rwlock_wrlock(&filters_lock);
+  holds_write_lock = 1;
+  __atomic_fetch_add(&replacements, 1, __ATOMIC_RELAXED);
+  uint32_t ret = real_create(self, filter_class, type_name, data_type, expression, parameters,
+                             filter_instance);
+  holds_write_lock = 0;
+  pthread_rwlock_unlock(&filters_lock);
+  return ret;
+}
+
+static int fail(int status, const char *what, const char *detail) {
+  snprintf(install_error, sizeof install_error, "%s: %s", what, detail ? detail : "");
+  return status;
+}
+
+// The protection of the page at addr, from /proc/self/maps (vtables sit in RELRO: read-only).
+static int page_protection(uintptr_t addr) {
+  FILE *maps = fopen("/proc/self/maps", "r");
+  if (maps == NULL) return -1;
+  char line[512];
+  int prot = -1;
+  while (prot < 0 && fgets(line, sizeof line, maps)) {
+    unsigned long start, end;
+    char perms[5];
+    if (sscanf(line, "%lx-%lx %4s", &start, &end, perms) == 3 && addr >= start && addr < end)
+      prot = (perms[0] == 'r' ? PROT_READ : 0) | (perms[1] == 'w' ? PROT_WRITE : 0) |
+             (perms[2] == 'x' ? PROT_EXEC : 0);
+  }
+  fclose(maps);
+  return prot;
+}
+
+// Replace every slot of the vtable named `vtable` that holds `from` with `to`; the count.
+static int patch_vtable(void *library, const char *vtable, void *from, void *to) {
+  void *table = dlsym(library, vtable);
+  Dl_info info;
+  const ElfW(Sym) *symbol = NULL;
+  if (table == NULL || !dladdr1(table, &info, (void **)&symbol, RTLD_DL_SYMENT) || !symbol)
+    return -1;
+  void **slots = table;
+  size_t count = symbol->st_size / sizeof(void *);
+  long page = sysconf(_SC_PAGESIZE);
+  int patched = 0;
+  for (size_t i = 0; i < count; i++) {
+    if (slots[i] != from) continue;
+    uintptr_t start = (uintptr_t)&slots[i] & ~(uintptr_t)(page - 1);
+    int prot = page_protection((uintptr_t)&slots[i]);
+    if (prot < 0 || mprotect((void *)start, page, prot | PROT_WRITE) != 0) return -1;
+    __atomic_store_n(&slots[i], to, __ATOMIC_RELEASE);
+    if (!(prot & PROT_WRITE)) mprotect((void *)start, page, prot);
+    patched++;
+  }
+  return patched;
+}
+
+static int install_locked(void) {
+  void *library = dlopen(FASTRTPS_SONAME, RTLD_NOW | RTLD_NOLOAD);
+  if (library == NULL) return fail(-1, FASTRTPS_SONAME " is not loaded", dlerror());
+  real_is_relevant = (is_relevant_fn)dlsym(library, IS_RELEVANT);
+  real_is_relevant_thunk = (is_relevant_fn)dlsym(library, IS_RELEVANT_THUNK);
+  real_create = (create_fn)dlsym(library, CREATE_FILTER);
+  if (!real_is_relevant || !real_is_relevant_thunk || !real_create)
+    return fail(-2, "a member is not exported by " FASTRTPS_SONAME, dlerror());
+  int creates = patch_vtable(library, FACTORY_VTABLE, (void *)real_create, (void *)locked_create);
+  if (creates < 1) return fail(-3, "no create_content_filter slot in", FACTORY_VTABLE);
+  int entries = patch_vtable(library, CFT_VTABLE, (void *)real_is_relevant,
+                             (void *)locked_is_relevant);
+  int thunks = patch_vtable(library, CFT_VTABLE, (void *)real_is_relevant_thunk,
+                            (void *)locked_is_relevant_thunk);
+  if (thunks < 1 || entries < 0) return fail(-4, "no is_relevant slot in", CFT_VTABLE);
+  return 0;
+}
+
+// 0 once installed (later calls return at once), < 0 if it cannot be: see cft_reader_lock_error.
+EXPORT int cft_reader_lock_install(void) {
+  pthread_mutex_lock(&install_mutex);
+  if (install_status == 1) install_status = install_locked();
+  int status = install_status;
+  pthread_mutex_unlock(&install_mutex);
+  return status;
+}
+
+EXPORT const char *cft_reader_lock_error(void) { return install_error; }
+
+// 0: filter evaluations by readers that took the read lock; 1: filter replacements.
+EXPORT unsigned long cft_reader_lock_count(int which) {
+  return __atomic_load_n(which == 0 ? &evaluations : &replacements, __ATOMIC_RELAXED);
+}
