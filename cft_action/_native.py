@@ -9,6 +9,12 @@ import os
 from pathlib import Path
 from typing import Optional
 
+#: The server guard, ``_guard.c`` and ``_guard_filter.c``: ``LD_PRELOAD``-ed into servers.
+GUARD_LIBRARY = '_cftguard'
+#: The reader lock, ``_reader_lock.c``: loaded with ctypes into processes that change filters.
+READER_LOCK_LIBRARY = '_cftreader'
+LIBRARIES = (GUARD_LIBRARY, READER_LOCK_LIBRARY)
+
 
 def extension_path(module: str) -> Optional[str]:
     """The absolute path of the shared library ``cft_action.<module>``, or None if not built."""

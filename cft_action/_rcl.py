@@ -22,7 +22,7 @@ from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy import get_rmw_implementation_identifier
 from rclpy.logging import get_logger
 
-from cft_action._native import extension_path
+from cft_action._native import extension_path, READER_LOCK_LIBRARY
 from cft_action.errors import BindingUnavailable, ContentFilterError
 
 RCL_RET_OK = 0
@@ -114,7 +114,8 @@ _rcutils = _load('librcutils.so')
 _rcl = _load('librcl.so')
 _rcl_action = _load('librcl_action.so')
 # cft_action/_reader_lock.c: serializes a reader's own filter evaluation with a filter change.
-_reader_lock = _load(extension_path('_cftreader') or '_cftreader (not built: pip install .)')
+_reader_lock = _load(extension_path(READER_LOCK_LIBRARY)
+                     or f'{READER_LOCK_LIBRARY} (not built: reinstall with a C compiler)')
 
 _rcutils_get_error_string = _rcutils.rcutils_get_error_string
 _rcutils_get_error_string.argtypes = []

@@ -26,14 +26,14 @@ import os
 import re
 from typing import Mapping, Optional
 
-from cft_action._native import extension_path
+from cft_action._native import extension_path, GUARD_LIBRARY
 from cft_action.errors import CftActionError
 
 __all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts',
            'filter_counts', 'environment']
 
 #: Name of the extension module that setup.py builds from ``_guard.c``.
-_MODULE = '_cftguard'
+_MODULE = GUARD_LIBRARY
 
 # State codes of cft_guard_state() in _guard.c.
 _ARMED, _ACTIVE, _INACTIVE = 0, 1, 2

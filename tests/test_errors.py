@@ -6,7 +6,7 @@ import pkgutil
 import pytest
 
 import cft_action
-from cft_action import guard
+from cft_action import _native
 from cft_action.errors import (BindingUnavailable, CftActionError, ContentFilterError,
                                InvalidArgumentError)
 from cft_action.filters import dds_literal, uuid_prefix_term
@@ -17,8 +17,8 @@ def _public_exceptions():
     """Every public exception class defined in a module of the package."""
     found = []
     for info in pkgutil.iter_modules(cft_action.__path__):
-        if info.name == guard._MODULE:
-            continue  # the guard library: a shared object to preload, not a Python module
+        if info.name in _native.LIBRARIES:
+            continue  # shared objects to preload or to load with ctypes, not Python modules
         module = importlib.import_module(f'cft_action.{info.name}')
         for name, value in vars(module).items():
             if (isinstance(value, type) and issubclass(value, BaseException)
