@@ -25,12 +25,14 @@ __all__ = ['GUID_PREFIX_LEN', 'ServiceProbe', 'participant_of']
 #: The length of a GUID prefix, which names the participant, at the start of an endpoint GID.
 GUID_PREFIX_LEN = 12
 
-#: How long a probe request may go unanswered before it is sent again: a server that has not yet
-#: matched the client's request writer drops the request, and one that has not matched its
-#: response reader drops the reply. The client sees the server's endpoints at once, the server
-#: sees the client's a discovery round later, so the first request is often dropped; a goal
-#: request waits for the reply, so the resend is short. A repeated request is harmless.
-PROBE_RESEND_S = 0.1
+#: How long a probe request may go unanswered before it is sent again, first and at most: a server
+#: that has not yet matched the client's request writer drops the request, and one that has not
+#: matched its response reader drops the reply. The client sees the server's endpoints at once,
+#: the server sees the client's a discovery round later, so the first request is often dropped,
+#: while a held goal request waits for the reply: the interval starts short and doubles. A
+#: repeated request is harmless.
+PROBE_FIRST_RESEND_S = 0.02
+PROBE_MAX_RESEND_S = 0.5
 
 
 def participant_of(endpoint_gid: Any) -> bytes:
@@ -57,6 +59,7 @@ class ServiceProbe:
         self._srv_type = srv_type
         self._request = request
         self._sent_at: Optional[float] = None
+        self._resend_after = PROBE_FIRST_RESEND_S
         with node.handle:
             self._client = _rclpy.Client(
                 node.handle, srv_type, service_name,
@@ -79,9 +82,11 @@ class ServiceProbe:
         return header is not None
 
     def send_if_due(self, now: float) -> None:
-        """Send the request if it was never sent, or went unanswered for PROBE_RESEND_S."""
-        if self._sent_at is not None and now - self._sent_at < PROBE_RESEND_S:
-            return
+        """Send the request if it was never sent, or went unanswered for the resend interval."""
+        if self._sent_at is not None:
+            if now - self._sent_at < self._resend_after:
+                return
+            self._resend_after = min(2 * self._resend_after, PROBE_MAX_RESEND_S)
         with self._client:
             if self._client.service_server_is_available():
                 self._client.send_request(self._request)
