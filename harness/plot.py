@@ -51,11 +51,8 @@ def demo_figure(result: dict[str, Any], path: Path) -> Path:
     ax.set_title(f'kB received per client, log\n({method})')
     _annotate(ax, x, kb, [f'{v:.0f}' for v in kb])
 
-    ax = axes[0][2]
-    cpu = [v['client_cpu_s'] for v in s]
-    ax.bar(x, cpu, color=colours)
-    ax.set_title('client CPU seconds (user + system,\nall client processes)')
-    _annotate(ax, x, cpu, [f'{v:.1f}' for v in cpu])
+    _bar_panel(axes[0][2], x, [v['client_cpu_s'] for v in s], colours,
+               'client CPU seconds (user + system,\nall client processes)', '.1f')
 
     ax = axes[1][0]
     width = 0.38
@@ -70,23 +67,13 @@ def demo_figure(result: dict[str, Any], path: Path) -> Path:
         ax.text(i + width / 2, b, _short(b), ha='center', va='bottom', fontsize=8)
     ax.margins(y=0.15)
 
-    ax = axes[1][1]
-    per_goal = [v['updates_per_goal'] for v in s]
-    ax.bar(x, per_goal, color=colours)
-    ax.set_title('filter updates per goal\n(each one an event at the server\'s writer)')
-    _annotate(ax, x, per_goal, [f'{v:.2f}' for v in per_goal])
-
-    ax = axes[0][3]
-    rate = [v['server_msgs_per_s'] or 0 for v in s]
-    ax.bar(x, rate, color=colours)
-    ax.set_title("server: feedback published per second\n(go to its last goal; higher is better)")
-    _annotate(ax, x, rate, [f'{v:.0f}' for v in rate])
-
-    ax = axes[1][3]
-    server_cpu = [v['server_cpu_ms_per_msg'] or 0 for v in s]
-    ax.bar(x, server_cpu, color=colours)
-    ax.set_title('server: CPU ms per feedback message\n(user + system; lower is better)')
-    _annotate(ax, x, server_cpu, [f'{v:.3f}' for v in server_cpu])
+    _bar_panel(axes[1][1], x, [v['updates_per_goal'] for v in s], colours,
+               'filter updates per goal\n(each one an event at the server\'s writer)', '.2f')
+    _bar_panel(axes[0][3], x, [v['server_msgs_per_s'] or 0 for v in s], colours,
+               'server: feedback published per second\n(go to its last goal; higher is better)',
+               '.0f')
+    _bar_panel(axes[1][3], x, [v['server_cpu_ms_per_msg'] or 0 for v in s], colours,
+               'server: CPU ms per feedback message\n(user + system; lower is better)', '.3f')
 
     ax = axes[1][2]
     ratios = [p['summary'].get('ratio_to_plain') or {} for p in phases]
@@ -124,6 +111,13 @@ def demo_figure(result: dict[str, Any], path: Path) -> Path:
 
 def _short(value: float) -> str:
     return f'{value:.0f}' if value >= 100 else f'{value:.3g}'
+
+
+def _bar_panel(ax: Any, x: Any, values: list[float], colours: Any, title: str,
+               number_format: str) -> None:
+    ax.bar(x, values, color=colours)
+    ax.set_title(title)
+    _annotate(ax, x, values, [format(v, number_format) for v in values])
 
 
 def _annotate(ax: Any, x: Any, heights: list[float], texts: list[str]) -> None:
