@@ -553,6 +553,14 @@ def comparable(goal: dict[str, Any], plain: Optional[dict[str, Any]]) -> bool:
             and plain['outcome'] == 'result')
 
 
+def after_update(config: str, goal: dict[str, Any]) -> bool:
+    """Whether a goal came with a filter update: sent within UPDATE_WINDOW_S after one of its
+    client's, in ``goals`` mode or with an untagged UUID of the caller's in ``client`` mode."""
+    updated = (goal['upd_after'] or 0) >= 1 and goal['since_update_s'] is not None \
+        and goal['since_update_s'] <= UPDATE_WINDOW_S
+    return updated and (config == 'goals' or (config == 'client' and goal['caller']))
+
+
 def compare(config: str, goal: dict[str, Any], plain: Optional[dict[str, Any]],
             published: dict[str, int]) -> Optional[str]:
     """How a cft goal fell short of plain's: None, or where the k it lacks are.
@@ -568,10 +576,7 @@ def compare(config: str, goal: dict[str, Any], plain: Optional[dict[str, Any]],
     if len(mine) >= len(theirs):
         return None
     missing = theirs - mine
-    updated = (goal['upd_after'] or 0) >= 1 and goal['since_update_s'] is not None \
-        and goal['since_update_s'] <= UPDATE_WINDOW_S
-    explicit = config == 'goals' or (config == 'client' and goal['caller'])
-    if 0 in missing and updated and explicit:
+    if 0 in missing and after_update(config, goal):
         return 'first after update'
     return 'at start' if not mine or max(missing) < min(mine) else 'gaps'
 
@@ -597,7 +602,8 @@ def summarize_config(config: str, lives: dict[str, list[dict[str, Any]]],
         'goals_caller_uuid': sum(g['caller'] for g in goals.values()),
         'goals_cancel_asked': sum(g['cancel_asked'] for g in goals.values()),
         'outcomes': {}, 'delivered': 0, 'duplicates': 0, 'after_result': 0, 'published_cb': 0,
-        'lost': 0, 'goals_with_loss': 0, 'lost_first': 0, 'foreign_cb': 0,
+        'lost': 0, 'goals_with_loss': 0, 'lost_first': 0, 'lost_first_after_update': 0,
+        'foreign_cb': 0,
         'taken_other': 0, 'taken_own_no_cb': 0, 'filter_updates': 0, 'filters_inactive': 0}
     for g in goals.values():
         s['outcomes'][g['outcome']] = s['outcomes'].get(g['outcome'], 0) + 1
@@ -616,6 +622,8 @@ def summarize_config(config: str, lives: dict[str, list[dict[str, Any]]],
         s['lost'] += lost
         s['goals_with_loss'] += lost > 0
         s['lost_first'] += count > 0 and 0 not in ks
+        s['lost_first_after_update'] += (count > 0 and 0 not in ks and config != 'rclpy'
+                                         and after_update(config, g))
     for life in mine:
         for taken in life.get('taken', []):
             s['taken_other'] += taken['other']
