@@ -1,11 +1,11 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 """The differential soak: one seeded workload, against plain rclpy and each cft mode, goal by goal.
 
-One action server runs for the whole benchmark, under ``cft-action guard --``: ``demos/_server.py
+One action server runs for the whole benchmark, under ``cft-action guard --``: ``harness.server
 --executor multi``, an rclpy ``ActionServer`` on a ``MultiThreadedExecutor`` that publishes each
 goal's feedback ``k = 0`` in the first line of ``execute`` and ``k = 1..`` every ``--period``, and
 counts what it published per goal UUID. The configurations (``--configs``, names
-as in ``demos/_client.py``: ``rclpy``, ``client``, ``goals``) run one after the other against it.
+as in ``harness/client.py``: ``rclpy``, ``client``, ``goals``) run one after the other against it.
 
 The workload. ``--slots`` client slots each start client processes one after the other. Life ``n``
 of slot ``s`` is drawn from ``random.Random(f'{seed}/{s}/{n}')`` alone, so the same life gets the
@@ -21,7 +21,7 @@ same draws in every configuration:
 Plain rclpy runs first, for ``--duration`` seconds; each cft configuration then runs exactly the
 lives that plain completed in each slot (bounded at twice the duration), so that every goal has a
 counterpart in plain rclpy. A client process proves its endpoints with an order-0 goal
-(``demos._client.probe``), then drives its goals from a timer on its executor (the node's
+(``harness.client.probe``), then drives its goals from a timer on its executor (the node's
 callback group, as the action clients: rclpy 7.1's ``send_goal_async`` is not safe against an
 executor taking the response in another thread), asks for every result as rclpy users do, and
 waits after the last result for feedback still on the way (``--linger``).
@@ -66,18 +66,11 @@ import uuid
 from pathlib import Path
 from typing import Any, Optional
 
-ROOT = Path(__file__).resolve().parents[1]
-if str(ROOT) not in sys.path:
-    sys.path.insert(0, str(ROOT))
+from benchmarks.soak import _counting
+from harness.crash import core_backtrace, machine_line, plain_env, signal_name
+from harness.load import _grid, environment_facts
+from harness.proc import Proc, python_module, run_role
 
-from benchmarks.hazard import (SERVER, core_backtrace, machine_line, plain_env,  # noqa: E402
-                               signal_name)
-from benchmarks.soak import _counting  # noqa: E402
-from demos._harness import _grid, environment_facts  # noqa: E402
-from demos._proc import Proc, run_role  # noqa: E402
-
-THIS = Path(__file__).resolve()
-PYTHON = sys.executable
 CONFIGS = ('rclpy', 'client', 'goals')
 #: Seconds a client may take to prove its endpoints (``probe``), per action client.
 PROBE_S = 30.0
@@ -248,7 +241,7 @@ def role_life(action: str, config: str, spec: str, linger: float, depth: int,
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from demos._client import filter_counters, make_client, probe
+    from harness.client import filter_counters, make_client, probe
 
     life = json.loads(spec)
     t0 = time.monotonic()
@@ -310,11 +303,11 @@ ROLES = {'life': role_life}
 
 def guard_command() -> list[str]:
     """``cft-action guard --``, from this interpreter's environment."""
-    beside = Path(PYTHON).with_name('cft-action')
+    beside = Path(sys.executable).with_name('cft-action')
     found = str(beside) if beside.exists() else shutil.which('cft-action')
     if found:
         return [found, 'guard', '--']
-    return [PYTHON, '-m', 'cft_action.cli', 'guard', '--']
+    return [sys.executable, '-m', 'cft_action.cli', 'guard', '--']
 
 
 class Differential:
@@ -341,8 +334,9 @@ class Differential:
         o = self.opts
         self.server_dir = tempfile.mkdtemp(prefix='cft_differential_')
         depth = ['--depth', str(o.depth)] if o.depth else []
-        argv = [*guard_command(), PYTHON, '-u', str(SERVER), self.action, str(o.period), *depth,
-                '--result-timeout', str(o.result_timeout), '--executor', 'multi']
+        argv = [*guard_command(), *python_module(
+            'harness.server', self.action, o.period, *depth, '--result-timeout', o.result_timeout,
+            '--executor', 'multi')]
         self.server = Proc('server', argv, self.env, cwd=self.server_dir, core=True)
         ready = self.server.wait_for('READY', 60.0) is not None
         status = self.server.last('STATUS') or ''
@@ -403,8 +397,8 @@ class Differential:
         spec = life_spec(o.seed, slot, n, o)
         start = time.monotonic()
         proc = Proc(f'{config} {slot}.{n}',
-                    [PYTHON, '-u', str(THIS), '_role', 'life', self.action, config,
-                     json.dumps(spec), str(o.linger), str(o.depth or 10), str(o.period)],
+                    python_module('benchmarks.differential', '_role', 'life', self.action, config,
+                                  json.dumps(spec), o.linger, o.depth or 10, o.period),
                     self.env)
         try:
             line = proc.wait_for('RESULT', self.life_bound)
