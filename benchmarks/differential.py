@@ -695,8 +695,9 @@ def _ratio(value: Optional[float]) -> str:
 def markdown_table(summaries: dict[str, dict[str, Any]]) -> str:
     rows = ['| config | client lives (failed) | goals | with callback | feedback delivered '
             '| fewer than plain (first after filter update / other at start / gaps) | foreign '
-            '| lost vs published (goals) | server crashes |',
-            '|---|---|---|---|---|---|---|---|---|']
+            '| lost vs published (goals) | goals that lost k = 0 (after a filter update) '
+            '| server crashes |',
+            '|---|---|---|---|---|---|---|---|---|---|']
     for s in summaries.values():
         fewer = ('-' if s['config'] == 'rclpy' else
                  f'{s["fewer_than_plain"]} ({s["fewer_first_after_update"]} / '
@@ -706,6 +707,7 @@ def markdown_table(summaries: dict[str, dict[str, Any]]) -> str:
         rows.append(f'| {s["config"]} | {s["lives"]} ({s["lives_failed"]}) | {s["goals"]} | '
                     f'{s["goals_cb"]} | {s["delivered"]} | {fewer} | {foreign} | '
                     f'{s["lost"]} of {s["published_cb"]} ({s["goals_with_loss"]}) | '
+                    f'{s["lost_first"]} ({s["lost_first_after_update"]}) | '
                     f'{s["server_crashes"]} |')
     rows += ['', '| ratio to plain | delivered on the same goals | lost '
              '| feedback of others taken |', '|---|---|---|---|']
