@@ -2,7 +2,7 @@
 """The Fibonacci action server of every demo, benchmark and test, in a process of its own.
 
 Usage: ``python -m harness.server ACTION PERIOD_S [--pad N] [--depth N|all] [--result-timeout S]
-[--stats-every S] [--late-feedback S]``
+[--stats-every S] [--late-feedback S] [--executor single|multi]``
 
 Goal ``order`` is the number of feedback messages the goal gets (a negative order is rejected;
 cancels are accepted). Each feedback ``sequence`` is ``[k, seconds, nanoseconds] + [0] * PAD``:
@@ -17,6 +17,7 @@ seconds after its result, the way a sample lost on the way and resent arrives at
 
 Execute callbacks are coroutines, so one single-threaded executor serves any number of goals
 (rclpy's ActionServer dropped goal requests under a MultiThreadedExecutor here).
+``--executor multi`` spins a ``MultiThreadedExecutor`` instead, as many real servers do.
 
 Queues: ``--depth N`` makes every queue keep-last N, reliable; ``--depth all`` keep-all (with a
 1000-sample resource hint), which tests use so that nothing is dropped on a loaded machine; without
@@ -30,7 +31,9 @@ watcher then has the counters from just before a crash). The JSON holds ``t`` (m
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
 line), ``guard_calls`` and ``guard_filter`` (its call and filter-verdict counters) and ``writers`` (the GUIDs of the feedback and status
-writers, in hex). End of input stops the server.
+writers, in hex). ``GOALS <json>`` replies to the command ``goals``: the feedback messages published
+per goal so far, by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). End
+of input stops the server.
 """
 
 from __future__ import annotations
@@ -48,7 +51,7 @@ from typing import Any, Optional
 import rclpy
 from rclpy.action import ActionServer, CancelResponse, GoalResponse
 from rclpy.callback_groups import ReentrantCallbackGroup
-from rclpy.executors import SingleThreadedExecutor
+from rclpy.executors import Executor, MultiThreadedExecutor, SingleThreadedExecutor
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
@@ -83,7 +86,7 @@ def queue_kwargs(depth: Optional[str], side: str = 'pub') -> dict[str, QoSProfil
 class TickingServer:
     """Action server that publishes ``order`` time-stamped feedback messages per goal."""
 
-    def __init__(self, node: Node, executor: SingleThreadedExecutor, action: str, period: float,
+    def __init__(self, node: Node, executor: Executor, action: str, period: float,
                  pad: int = 0, depth: Optional[str] = None,
                  result_timeout: int = DEFAULT_RESULT_TIMEOUT_S,
                  late_feedback: float = 0.0) -> None:
@@ -99,6 +102,7 @@ class TickingServer:
         # id(goal handle) -> [goal handle, next k, order, done, first publish, last publish]
         self.active: dict[int, list[Any]] = {}
         self.published = 0
+        self.published_per_goal: dict[str, int] = {}  # goal UUID (hex) -> messages published
         self.accepted = 0
         self.late_ticks = 0
         # Over finished goals: feedback intervals, and the seconds they took (the achieved rate).
@@ -123,8 +127,10 @@ class TickingServer:
         now = time.time_ns()
         sequence[0], sequence[1], sequence[2] = k, now // 1_000_000_000, now % 1_000_000_000
         goal_handle.publish_feedback(Fibonacci.Feedback(sequence=sequence))
+        key = bytes(goal_handle.goal_id.uuid).hex()
         with self.lock:
             self.published += 1
+            self.published_per_goal[key] = max(self.published_per_goal.get(key, 0), k + 1)
 
     async def execute(self, goal_handle: Any) -> Fibonacci.Result:
         """Publish the first feedback at once; the ticker publishes the rest and ends the goal."""
@@ -216,6 +222,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--late-feedback', type=float, default=0.0,
                         help='publish one more feedback (k = order) this many seconds after a '
                              "goal's success, as a sample resent after a loss arrives late")
+    parser.add_argument('--executor', choices=['single', 'multi'], default='single',
+                        help='SingleThreadedExecutor (default) or MultiThreadedExecutor')
     return parser.parse_args(argv)
 
 
@@ -224,7 +232,7 @@ def main(argv: list[str]) -> None:
     args = parse_args(argv)
     rclpy.init()
     node = Node('cft_fib_server')
-    executor = SingleThreadedExecutor()
+    executor = MultiThreadedExecutor() if args.executor == 'multi' else SingleThreadedExecutor()
     executor.add_node(node)
     server = TickingServer(node, executor, args.action, args.period, args.pad, args.depth,
                            args.result_timeout, args.late_feedback)
@@ -252,6 +260,11 @@ def main(argv: list[str]) -> None:
     for line in sys.stdin:
         if line.strip() == 'stats':
             report()
+        elif line.strip() == 'goals':
+            with server.lock:
+                counts = json.dumps(server.published_per_goal)
+            with out:
+                print('GOALS ' + counts, flush=True)
     # Stop every thread that calls into rclpy, then leave without interpreter finalization: a
     # daemon thread that re-enters Python during finalization is ended by pthread_exit, whose
     # unwinding through rclpy's C++ frames calls std::terminate (SIGABRT): a crash watcher would
