@@ -128,8 +128,15 @@ def _forward(source: Future, target: Future) -> None:
     source.add_done_callback(done)
 
 
-def _resolve_mode(feedback_filter: Optional[str]) -> str:
+def _resolve_mode(feedback_filter: Optional[str], optimization: Optional[bool]) -> str:
     from_env = os.environ.get(FEEDBACK_FILTER_ENV)
+    if optimization is not None:
+        implied = 'client' if optimization else 'off'
+        if feedback_filter is not None and (feedback_filter == 'off') == optimization:
+            raise InvalidArgumentError(
+                f'enable_feedback_msg_optimization={optimization} contradicts '
+                f'feedback_filter={feedback_filter!r}')
+        feedback_filter = feedback_filter or implied
     mode = from_env or feedback_filter or 'client'
     if mode not in MODES:
         source = f'environment variable {FEEDBACK_FILTER_ENV}' if from_env else 'feedback_filter'
@@ -141,7 +148,9 @@ class ActionClient(_RclpyActionClient):
     """ROS Action client whose feedback subscription receives only its own goals' feedback."""
 
     def __init__(self, node: Node, action_type: Any, action_name: str, *,
-                 feedback_filter: Optional[str] = None, **kwargs: Any) -> None:
+                 feedback_filter: Optional[str] = None,
+                 enable_feedback_msg_optimization: Optional[bool] = None,
+                 **kwargs: Any) -> None:
         """
         Create an ActionClient.
 
@@ -162,12 +171,17 @@ class ActionClient(_RclpyActionClient):
             The environment variable ``CFT_ACTION_FEEDBACK_FILTER`` overrides it. Where the filter
             cannot be used, the client falls back to plain behaviour, logs why once, and reports
             it in :attr:`feedback_filter_state`.
+        :param enable_feedback_msg_optimization: The name of the newer distros' opt-in feedback
+            filter (rclpy 10, Lyrical), accepted so that code moves between distros: ``True``
+            means ``feedback_filter='client'`` unless another filtering mode is given, ``False``
+            means ``'off'``. Unlike there, filtering is on when neither is given.
         :param kwargs: ``callback_group``, ``goal_service_qos_profile``,
             ``result_service_qos_profile``, ``cancel_service_qos_profile``,
             ``feedback_sub_qos_profile`` and ``status_sub_qos_profile``, as for rclpy.
-        :raises ValueError: if ``feedback_filter`` or the environment variable names no mode.
+        :raises ValueError: if ``feedback_filter`` or the environment variable names no mode, or
+            ``enable_feedback_msg_optimization`` contradicts ``feedback_filter``.
         """
-        mode = _resolve_mode(feedback_filter)
+        mode = _resolve_mode(feedback_filter, enable_feedback_msg_optimization)
         self._cft_logger = node.get_logger().get_child('cft_action')
         self._filter_lock = threading.RLock()
         self._plan: Optional[GoalFilterPlan] = None

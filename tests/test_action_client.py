@@ -422,3 +422,17 @@ def test_mode_from_environment_and_bad_values(ros, server, monkeypatch):
     monkeypatch.delenv('CFT_ACTION_FEEDBACK_FILTER')
     with pytest.raises(ValueError, match="feedback_filter='sometimes'"):
         ActionClient(ros.node, Fibonacci, action, feedback_filter='sometimes')
+
+
+@pytest.mark.parametrize('kwargs, mode', [
+    ({'enable_feedback_msg_optimization': True}, 'client'),
+    ({'enable_feedback_msg_optimization': False}, 'off'),
+    ({'enable_feedback_msg_optimization': True, 'feedback_filter': 'goals'}, 'goals'),
+])
+def test_the_newer_distros_flag_is_accepted(ros, server, kwargs, mode):
+    """Lyrical's rclpy names its opt-in filter enable_feedback_msg_optimization (rclpy#1633)."""
+    action, _ = server
+    assert make_client(ros, action, **kwargs).feedback_filter_state.mode == mode
+    with pytest.raises(ValueError, match='contradicts'):
+        ActionClient(ros.node, Fibonacci, action, enable_feedback_msg_optimization=False,
+                     feedback_filter='client')
