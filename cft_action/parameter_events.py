@@ -540,6 +540,30 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             self._user_filter = options
             self._publish_state()
 
+    def configure_nodes_filter(self, node_names: Optional[Sequence[str]] = None) -> bool:
+        """
+        Receive the parameter events of these nodes only: the newer distros' name (rclpy#1531).
+
+        Accepted so that code moves between distros; it is :meth:`set_parameter_event_filter`
+        with :func:`node_filter`.
+
+        :param node_names: Fully qualified node names. ``None`` or empty clears the filter: the
+            handler filters on the nodes its callbacks watch again.
+        :return: ``True`` if the filter is set; ``False`` if it was refused, which is logged with
+            the reason.
+        """
+        try:
+            if node_names:
+                options = node_filter(node_names)
+                self.set_parameter_event_filter(options.filter_expression,
+                                                options.expression_parameters)
+            else:
+                self.set_parameter_event_filter('')
+        except (ContentFilterError, ValueError) as e:
+            self._cft_logger.warning(f'configure_nodes_filter({node_names!r}) failed: {e}')
+            return False
+        return True
+
     def get_parameter_event_filter(self) -> ContentFilterOptions:
         """
         Return the filter of the ``/parameter_events`` subscription, as the middleware reports it.

@@ -30,7 +30,7 @@ from rclpy.type_support import check_is_valid_msg_type
 from rosidl_parser.definition import AbstractString, Array, BasicType, NamespacedType
 
 from cft_action import _rcl, sql
-from cft_action.errors import ContentFilterError
+from cft_action.errors import ContentFilterError, InvalidArgumentError
 from cft_action.filters import dds_literals, Literal, never_match_on
 
 __all__ = [
@@ -141,9 +141,10 @@ def create_filtered_subscription(
     topic: str,
     callback: Callable,
     qos_profile: Union[QoSProfile, int],
-    filter_expression: str,
+    filter_expression: str = '',
     expression_parameters: Sequence[Literal] = (),
     *,
+    content_filter_options: Optional[ContentFilterOptions] = None,
     callback_group: Optional[CallbackGroup] = None,
     event_callbacks: Optional[SubscriptionEventCallbacks] = None,
     qos_overriding_options: Optional[QoSOverridingOptions] = None,
@@ -170,6 +171,9 @@ def create_filtered_subscription(
     :param expression_parameters: Values for ``%0`` .. ``%99``. Python values and bare strings are
         turned into DDS literals by :func:`cft_action.filters.dds_literal`: ``hello`` is sent as
         ``'hello'``.
+    :param content_filter_options: The filter as Kilted's ``Node.create_subscription`` takes it,
+        ``ContentFilterOptions(filter_expression, expression_parameters)``, instead of the two
+        arguments above, so that code moves between distros.
     :param callback_group: The callback group for the subscription. If ``None``, then the
         default callback group for the node is used.
     :param event_callbacks: User-defined callbacks for middleware events.
@@ -180,6 +184,11 @@ def create_filtered_subscription(
     :raises ContentFilterError: if the filter cannot be applied; the message names the expression
         and carries rcl's error string. No subscription is left behind.
     """
+    if content_filter_options is not None:
+        if filter_expression or expression_parameters:
+            raise InvalidArgumentError('give the filter either as content_filter_options or as '
+                                       'filter_expression and expression_parameters, not both')
+        filter_expression, expression_parameters = content_filter_options
     if not filter_expression:
         raise ContentFilterError('a filtered subscription needs a non-empty filter_expression; '
                                  'use Node.create_subscription for an unfiltered one')

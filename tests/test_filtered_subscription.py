@@ -9,8 +9,9 @@ from rclpy.executors import MultiThreadedExecutor
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, Int32, String
 
-from cft_action import (ContentFilterError, create_filtered_subscription, get_content_filter,
-                        is_content_filter_supported, is_filtered, set_content_filter)
+from cft_action import (ContentFilterError, ContentFilterOptions, create_filtered_subscription,
+                        get_content_filter, is_content_filter_supported, is_filtered,
+                        set_content_filter)
 from harness.polling import wait_until
 from harness.ros import RosSession, unique_name
 from tests.support import helper_process
@@ -63,6 +64,21 @@ def test_only_matching_messages_arrive(ros, publisher, msg_type, topic, expressi
     assert is_filtered(subscription)
     burst_and_collect(ros, child, topic, received, len(expected))
     assert received == expected
+
+
+def test_content_filter_options_is_the_newer_distros_form(ros, publisher):
+    """Kilted's create_subscription takes content_filter_options=ContentFilterOptions(...)."""
+    prefix, child = publisher
+    received = []
+    subscription = create_filtered_subscription(
+        ros.node, Int32, f'{prefix}/ints', lambda m: received.append(m.data), QOS,
+        content_filter_options=ContentFilterOptions('data > %0', ['25']))
+    assert get_content_filter(subscription) == ('data > %0', ['25'])
+    burst_and_collect(ros, child, 'ints', received, 4)
+    assert received == [26, 27, 28, 29]
+    with pytest.raises(ValueError, match='not both'):
+        create_filtered_subscription(ros.node, Int32, f'{prefix}/ints', print, QOS, 'data > 1',
+                                     content_filter_options=ContentFilterOptions('data > 2', []))
 
 
 def test_bare_string_parameter_filters_like_quoted(ros, publisher):

@@ -237,6 +237,17 @@ def test_more_nodes_than_expression_parameters(ros):
     assert handler.parameter_event_filter_state.updates == 120
 
 
+def test_configure_nodes_filter_is_the_newer_distros_name(ros):
+    """Lyrical's rclpy has configure_nodes_filter(node_names) -> bool (rclpy#1531)."""
+    handler = ParameterEventHandler(ros.node)
+    assert handler.configure_nodes_filter(['/b', '/a'])
+    assert handler.get_parameter_event_filter() == node_filter(['/a', '/b'])
+    assert not handler.configure_nodes_filter(["/it's"])  # no DDS literal holds a quote
+    assert handler.get_parameter_event_filter() == node_filter(['/a', '/b'])
+    assert handler.configure_nodes_filter(None)
+    assert handler.get_parameter_event_filter() == (NO_NODES, [])  # no callback watches a node
+
+
 def test_user_expression_with_syntax_error_raises_naming_it(ros, start_nodes, prefix):
     a = f'{prefix}/a'
     child = start_nodes(a)
