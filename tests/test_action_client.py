@@ -273,13 +273,14 @@ def test_a_goal_is_held_until_its_filter_update_has_reached_the_server(
 def test_a_held_goal_waits_from_the_first_spin_not_from_the_call(ros, server, monkeypatch):
     """A caller that sends goals and spins only later gives the probe no chance before: its wait
     counts from the executor's first poll, so a late spin does not make it give up."""
-    monkeypatch.setattr(cft_action.client, 'FILTER_ARRIVAL_TIMEOUT', 1.0)
+    # Shorter than the default to keep the test short, still far longer than a reply takes.
+    monkeypatch.setattr(cft_action.client, 'FILTER_ARRIVAL_TIMEOUT', 3.0)
     action, _ = server
     client = make_client(ros, action)
     received = []
     future = client.send_goal_async(Fibonacci.Goal(order=3), feedback_callback=received.append,
                                     goal_uuid=UUID(uuid=list(uuid.uuid4().bytes)))
-    time.sleep(1.5)
+    time.sleep(3.5)  # not spinning: the probe cannot be polled, nor answered
     assert ros.spin_until(future.done, 20)
     assert result_of(ros, future.result()).status == GoalStatus.STATUS_SUCCEEDED
     ros.spin_until(lambda: len(received) == 3, 5)
