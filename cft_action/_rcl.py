@@ -18,10 +18,10 @@ from typing import Any, Callable, Optional, Sequence
 
 # Importing rclpy's C extension loads librcl and friends from the installed wheels; we then bind
 # to those very copies instead of guessing paths. A failed take raises its RCLError, as rclpy's.
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy import get_rmw_implementation_identifier
 from rclpy.logging import get_logger
 
+from cft_action._rclpy_compat import RCLError
 from cft_action._native import extension_path, READER_LOCK_LIBRARY
 from cft_action.errors import BindingUnavailable, ContentFilterError
 
@@ -146,7 +146,7 @@ def _take_failed_is_empty(ret: int, func: Any, args: tuple) -> bool:
     if ret in (RCL_RET_SUBSCRIPTION_TAKE_FAILED, RCL_RET_CLIENT_TAKE_FAILED):
         return False
     if ret != RCL_RET_OK:
-        raise _rclpy.RCLError(f'{func.__name__} returned {ret}: {take_rcl_error()}')
+        raise RCLError(f'{func.__name__} returned {ret}: {take_rcl_error()}')
     return True
 
 
@@ -409,7 +409,7 @@ def action_feedback_subscription(action_client_ptr: int,
     """Locate the feedback subscription inside an ``rcl_action_client_t``.
 
     :param action_client_ptr: address of the ``rcl_action_client_t``
-        (``ActionClient._client_handle.pointer``).
+        (the ``pointer`` of the action client's rcl handle).
     :param resolved_action_name: the fully qualified action name, after remapping.
     :return: ``(address, '')`` when the layout check passed, or ``(None, reason)`` when it did not;
         in that case nothing at the guessed address was touched as a subscription.

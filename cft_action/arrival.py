@@ -16,9 +16,10 @@ from __future__ import annotations
 
 from typing import Any, Optional
 
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_services_default
+
+from cft_action._rclpy_compat import new_rcl_client
 
 __all__ = ['GUID_PREFIX_LEN', 'ServiceProbe', 'participant_of']
 
@@ -60,10 +61,8 @@ class ServiceProbe:
         self._request = request
         self._sent_at: Optional[float] = None
         self._resend_after = PROBE_FIRST_RESEND_S
-        with node.handle:
-            self._client = _rclpy.Client(
-                node.handle, srv_type, service_name,
-                (qos_profile or qos_profile_services_default).get_c_qos_profile())
+        self._client = new_rcl_client(node, srv_type, service_name,
+                                      qos_profile or qos_profile_services_default)
 
     def poll(self, now: float) -> bool:
         """Send the request, or send it again, and return True once a reply has come.

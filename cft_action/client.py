@@ -23,13 +23,13 @@ from typing import Any, Callable, NamedTuple, Optional
 
 from action_msgs.msg import GoalStatus
 from action_msgs.srv import CancelGoal
-from rclpy.action import ActionClient as _RclpyActionClient
 from rclpy.node import Node
 from rclpy.qos import qos_profile_services_default
 from rclpy.task import Future
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import _rcl
+from cft_action._rclpy_compat import CompatActionClient
 from cft_action.arrival import participant_of, ServiceProbe
 from cft_action.errors import InvalidArgumentError
 from cft_action.filters import MATCH_ALL
@@ -144,7 +144,7 @@ def _resolve_mode(feedback_filter: Optional[str], optimization: Optional[bool]) 
     return mode
 
 
-class ActionClient(_RclpyActionClient):
+class ActionClient(CompatActionClient):
     """ROS Action client whose feedback subscription receives only its own goals' feedback."""
 
     def __init__(self, node: Node, action_type: Any, action_name: str, *,
@@ -256,7 +256,7 @@ class ActionClient(_RclpyActionClient):
 
     def _locate_entities(self, resolved_action_name: str) -> None:
         """Find the feedback subscription and result client inside rcl's action client."""
-        pointer = self._client_handle.pointer
+        pointer = self._cft_client_handle.pointer
         self._feedback_subscription_ptr, self._feedback_subscription_reason = (
             _rcl.action_feedback_subscription(pointer, resolved_action_name))
         self._result_client_ptr, reason = _rcl.action_result_client(pointer, resolved_action_name)
@@ -267,9 +267,9 @@ class ActionClient(_RclpyActionClient):
                 'feedback is taken as by rclpy and dropped once the goal result arrives, even '
                 f'feedback the server published before the result: {reason}')
             return
-        self._feedback_support = _rcl.MessageSupport(self._action_type.Impl.FeedbackMessage)
+        self._feedback_support = _rcl.MessageSupport(self._cft_action_type.Impl.FeedbackMessage)
         self._result_support = _rcl.MessageSupport(
-            self._action_type.Impl.GetResultService.Response)
+            self._cft_action_type.Impl.GetResultService.Response)
 
     def _install_filter(self) -> None:
         self._installed = True
@@ -277,7 +277,7 @@ class ActionClient(_RclpyActionClient):
         if mode == 'off':
             self._fall_back('feedback_filter is off', log=False)
             return
-        if not is_content_filter_supported(self._node):
+        if not is_content_filter_supported(self._cft_node):
             self._fall_back('the rmw implementation has no content filter')
             return
         pointer = self._feedback_subscription_ptr
@@ -308,7 +308,7 @@ class ActionClient(_RclpyActionClient):
             expression = make_expression()
             if expression is None:
                 return
-            with self._client_handle:
+            with self._cft_client_handle:
                 _rcl.set_content_filter(self._feedback_ptr, expression)
         except (_rcl.ContentFilterError, ExpressionTooLong) as e:
             self._abandon_filter(f'a filter update failed: {e}')
@@ -321,7 +321,7 @@ class ActionClient(_RclpyActionClient):
         # always-true expression is an in-place change that lets all feedback through again.
         self._plan = None
         try:
-            with self._client_handle:
+            with self._cft_client_handle:
                 _rcl.set_content_filter(self._feedback_ptr, MATCH_ALL)
         except _rcl.ContentFilterError as e:
             reason += f'; and letting all feedback through failed too, feedback may be lost: {e}'
@@ -382,7 +382,7 @@ class ActionClient(_RclpyActionClient):
           the Goal type of the provided action when the service was
           constructed.
         """
-        if not isinstance(goal, self._action_type.Goal):
+        if not isinstance(goal, self._cft_action_type.Goal):
             raise TypeError()
         with self._filter_lock:
             if goal_uuid is not None and feedback_callback is not None:
@@ -405,8 +405,8 @@ class ActionClient(_RclpyActionClient):
 
     def destroy(self) -> None:
         """Destroy the underlying action client handle."""
-        self._node.destroy_timer(self._release_timer)
-        self._node.destroy_timer(self._arrival_timer)
+        self._cft_node.destroy_timer(self._release_timer)
+        self._cft_node.destroy_timer(self._arrival_timer)
         with self._filter_lock:
             self._end_probe()
         super().destroy()
@@ -421,15 +421,15 @@ class ActionClient(_RclpyActionClient):
         """
         topic = f'{self._resolved_action_name}/_action/feedback'
         if self._own_participant is None:
-            name, namespace = self._node.get_name(), self._node.get_namespace()
-            for info in self._node.get_subscriptions_info_by_topic(topic):
+            name, namespace = self._cft_node.get_name(), self._cft_node.get_namespace()
+            for info in self._cft_node.get_subscriptions_info_by_topic(topic):
                 if (info.node_name, info.node_namespace) == (name, namespace):
                     self._own_participant = participant_of(info.endpoint_gid)
                     break
             else:
                 return True  # not seen ourselves yet: ask for the proof rather than guess
         return any(participant_of(info.endpoint_gid) != self._own_participant
-                   for info in self._node.get_publishers_info_by_topic(topic))
+                   for info in self._cft_node.get_publishers_info_by_topic(topic))
 
     def _needed_revision(self) -> int:
         return max((held.revision for held in self._held), default=0)
@@ -447,8 +447,8 @@ class ActionClient(_RclpyActionClient):
         request = CancelGoal.Request()
         request.goal_info.goal_id.uuid = list(random_uuid4())
         self._arrival_probe = ServiceProbe(
-            self._node, CancelGoal, f'{self._resolved_action_name}/_action/cancel_goal', request,
-            self._cancel_qos)
+            self._cft_node, CancelGoal, f'{self._resolved_action_name}/_action/cancel_goal',
+            request, self._cancel_qos)
         # Without a plan the filter was abandoned for one that matches everything, which this
         # probe, created after it, proves as well.
         self._probe_revision = (self._plan.revision if self._plan is not None
@@ -520,19 +520,18 @@ class ActionClient(_RclpyActionClient):
                 'costs a filter update at the server; ActionClient.new_goal_uuid() avoids it')
         self._update(self._plan.grow)
 
-    def _remove_pending_result_request(self, future: Future) -> None:
+    def _cft_result_request_done(self, future: Future) -> None:
         # rclpy drops a goal's feedback callback as soon as its result arrives, and so loses the
         # goal's feedback still queued behind the result (measured: 559 of 600 with 200 goals).
         # Here the goal counts as finished and is released after the grace period instead.
-        sequence_number = self._remove_pending_request(future, self._pending_result_requests)
-        goal_id = self._result_sequence_number_to_goal_id.pop(sequence_number, None)
+        goal_id = self._cft_forget_result_request(future)
         if goal_id is not None:
             self._note_finished([bytes(goal_id.uuid)])
 
     def is_ready(self, wait_set) -> bool:
         """Return True if one or more entities are ready in the wait set."""
         ready = super().is_ready(wait_set)
-        if not self._is_feedback_ready:
+        if not self._cft_feedback_ready():
             self._feedback_drained_at = time.monotonic()
         return ready
 
@@ -542,10 +541,10 @@ class ActionClient(_RclpyActionClient):
         As rclpy's, except that the result response and the feedback are taken with their source
         timestamps, and feedback that the server published after its goal's result is dropped.
         """
-        result_ready, feedback_ready = self._is_result_response_ready, self._is_feedback_ready
+        result_ready, feedback_ready = self._cft_take_readiness()
         if self._result_client_ptr is not None:
             # rclpy's takes drop the sample info: these two are taken below, with it.
-            self._is_result_response_ready = self._is_feedback_ready = False
+            self._cft_clear_readiness()
         data = super().take_data()
         if 'result' in data:
             self._note_result(data['result'][0], 0)
@@ -568,19 +567,19 @@ class ActionClient(_RclpyActionClient):
         if feedback is not None:
             self._feedback_taken += 1
             goal_uuid = bytes(feedback.goal_id.uuid)
-            if (goal_uuid not in self._feedback_callbacks
+            if (goal_uuid not in self._cft_feedback_callbacks
                     or self._published_after_result(goal_uuid, stamp)):
                 self._feedback_dropped += 1
                 del data['feedback']
         return data
 
     def _note_result(self, sequence_number: int, stamp: int) -> None:
-        goal_id = self._result_sequence_number_to_goal_id.get(sequence_number)
+        goal_id = self._cft_goal_id_of_result_request(sequence_number)
         if goal_id is None:
             return
         goal_uuid = bytes(goal_id.uuid)
         with self._filter_lock:
-            if goal_uuid in self._feedback_callbacks:
+            if goal_uuid in self._cft_feedback_callbacks:
                 # The first result answers the goal; a later request is answered later still.
                 self._result_stamps.setdefault(goal_uuid, stamp)
 
@@ -608,7 +607,7 @@ class ActionClient(_RclpyActionClient):
         finished = []
         if 'goal' in taken_data:
             sequence_number, response = taken_data['goal']
-            goal_id = self._goal_sequence_number_to_goal_id.get(sequence_number)
+            goal_id = self._cft_goal_id_of_goal_request(sequence_number)
             if goal_id is not None and not response.accepted:
                 finished.append(bytes(goal_id.uuid))
         await super().execute(taken_data)
@@ -622,7 +621,7 @@ class ActionClient(_RclpyActionClient):
         now = time.monotonic()
         with self._filter_lock:
             new = [u for u in goal_uuids
-                   if u in self._feedback_callbacks and u not in self._finished]
+                   if u in self._cft_feedback_callbacks and u not in self._finished]
             for goal_uuid in new:
                 self._finished[goal_uuid] = now
             if new:
@@ -639,7 +638,7 @@ class ActionClient(_RclpyActionClient):
                         and finished_at < self._feedback_drained_at):
                     del self._finished[goal_uuid]
                     self._result_stamps.pop(goal_uuid, None)
-                    self._feedback_callbacks.pop(goal_uuid, None)
+                    self._cft_feedback_callbacks.pop(goal_uuid, None)
                     if self._plan is not None:
                         self._plan.finish(goal_uuid)
             # One shrink once every finished goal is released, not one per release check: each

@@ -74,6 +74,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.subscription import Subscription
 
 from cft_action._rcl import ContentFilterError
+from cft_action._rclpy_compat import set_parameter_event_callbacks
 from cft_action.arrival import participant_of, ServiceProbe
 from cft_action.filters import dds_literal, dds_literals, Literal, never_match_on
 from cft_action.subscription import (
@@ -253,7 +254,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         # filter later recreates its DataReader; so its three attributes are set here instead.
         self.node = node
         self.qos_profile = qos_profile  # type: ignore[assignment]  # rclpy types it QoSProfile only
-        self._callbacks = _RclpyParameterEventHandler.Callbacks()
+        self._rclpy_callbacks = set_parameter_event_callbacks(self)  # what its methods use
 
         self._cft_logger = node.get_logger().get_child('cft_action')
         # Guards the filter bookkeeping and the rmw calls. It is never taken while the Callbacks
@@ -305,7 +306,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
     def _on_event(self, event: ParameterEvent) -> None:
         with self._received_lock:
             self._received += 1
-        self._callbacks.event_callback(event)
+        self._rclpy_callbacks.event_callback(event)
 
     def _wanted(self) -> tuple[str, str, ContentFilterOptions]:
         """Return ``(mode, reason, filter)`` for the callbacks registered now."""

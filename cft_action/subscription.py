@@ -21,15 +21,17 @@ import rclpy
 from rclpy.callback_groups import CallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.exceptions import InvalidTopicNameException
-from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
-from rclpy.qos_overriding_options import _declare_qos_parameters, QoSOverridingOptions
+from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.subscription import Subscription
 from rclpy.type_support import check_is_valid_msg_type
 from rosidl_parser.definition import AbstractString, Array, BasicType, NamespacedType
 
 from cft_action import _rcl, sql
+from cft_action._rclpy_compat import (declare_qos_parameters, new_rcl_subscription,
+                                      register_subscription, validate_qos_or_depth,
+                                      validate_topic_name)
 from cft_action.errors import ContentFilterError, InvalidArgumentError
 from cft_action.filters import dds_literals, Literal, never_match_on
 
@@ -124,9 +126,7 @@ def _validate_on_probe(node: Node, msg_type, qos_profile: QoSProfile, topic: str
     if field is None:
         return  # no primitive field to build a first filter on: the real call reports errors
     probe_topic = f'/_cft_action_probe/t{uuid.uuid4().hex}'
-    with node.handle:
-        probe = _rclpy.Subscription(node.handle, msg_type, probe_topic,
-                                    qos_profile.get_c_qos_profile())
+    probe = new_rcl_subscription(node, msg_type, probe_topic, qos_profile)
     try:
         with probe:
             _apply(probe.pointer, probe_topic, never_match_on(field), ())
@@ -194,24 +194,22 @@ def create_filtered_subscription(
                                  'use Node.create_subscription for an unfiltered one')
     # What follows mirrors Node.create_subscription, with the filter set between the creation of
     # the rcl subscription and its registration with the node.
-    qos_profile = node._validate_qos_or_depth_parameter(qos_profile)
+    qos_profile = validate_qos_or_depth(node, qos_profile)
     callback_group = callback_group or node.default_callback_group
     try:
         final_topic = node.resolve_topic_name(topic)
     except RuntimeError:
         try:
-            node._validate_topic_or_service_name(topic)
+            validate_topic_name(node, topic)
         except InvalidTopicNameException as ex:
             raise ex from None
         raise
-    _declare_qos_parameters(Subscription, node, final_topic, qos_profile,
-                            qos_overriding_options or QoSOverridingOptions([]))
+    declare_qos_parameters(node, final_topic, qos_profile,
+                           qos_overriding_options or QoSOverridingOptions([]))
     check_is_valid_msg_type(msg_type)
     _validate_on_probe(node, msg_type, qos_profile, final_topic, filter_expression,
                        expression_parameters)
-    with node.handle:
-        subscription_object = _rclpy.Subscription(
-            node.handle, msg_type, topic, qos_profile.get_c_qos_profile())
+    subscription_object = new_rcl_subscription(node, msg_type, topic, qos_profile)
     try:
         with subscription_object:
             _apply(subscription_object.pointer, final_topic, filter_expression,
@@ -225,8 +223,7 @@ def create_filtered_subscription(
     if event_callbacks is not None and event_callbacks.message_lost is not None:
         _warn_message_lost(node)
     callback_group.add_entity(subscription)
-    node._subscriptions.append(subscription)
-    node._wake_executor()
+    register_subscription(node, subscription)
     # rclpy 7.1 annotates event_handlers as one EventHandler; it is a list of them.
     for event_handler in subscription.event_handlers:  # type: ignore[attr-defined]
         node.add_waitable(event_handler)

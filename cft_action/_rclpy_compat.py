@@ -1,0 +1,189 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""Every touch of an rclpy private name, in one module, checked once against the installed rclpy.
+
+cft_action is a drop-in for rclpy 7.1 (Jazzy) classes, and a drop-in has to reach inside them: the
+action client's bookkeeping of goals and callbacks, the node's subscription registry, the rcl
+entities of the C extension. Those names are private, so rclpy may change them in any release.
+They are named here and nowhere else, and checked when this module is imported:
+
+- a name that is missing raises :class:`~cft_action.errors.BindingUnavailable`, which names it and
+  the tested version, instead of an ``AttributeError`` deep inside a callback later;
+- a version other than the tested one, with every name present, logs one warning.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+from typing import Any, Callable, Optional
+
+import rclpy.qos_overriding_options
+from rclpy.action import ActionClient as _RclpyActionClient
+from rclpy.impl.implementation_singleton import rclpy_implementation as _rclpy
+from rclpy.logging import get_logger
+from rclpy.node import Node
+from rclpy.parameter_event_handler import ParameterEventHandler as _RclpyParameterEventHandler
+from rclpy.qos import QoSProfile
+from rclpy.subscription import Subscription
+from rclpy.task import Future
+
+from cft_action.errors import BindingUnavailable
+
+__all__ = ['TESTED_RCLPY', 'CompatActionClient', 'RCLError', 'declare_qos_parameters',
+           'new_rcl_client', 'new_rcl_subscription', 'register_subscription',
+           'set_parameter_event_callbacks', 'validate_qos_or_depth', 'validate_topic_name']
+
+#: The rclpy minor version the package is tested with.
+TESTED_RCLPY = (7, 1)
+
+#: Members of rclpy classes that this module uses: (owner, name).
+_REQUIRED: tuple[tuple[Any, str], ...] = (
+    (_RclpyActionClient, '_remove_pending_request'),
+    (_RclpyActionClient, '_remove_pending_result_request'),
+    (Node, '_validate_qos_or_depth_parameter'),
+    (Node, '_validate_topic_or_service_name'),
+    (Node, '_wake_executor'),
+    (rclpy.qos_overriding_options, '_declare_qos_parameters'),
+    (_RclpyParameterEventHandler, 'Callbacks'),
+    (_rclpy, 'Subscription'),
+    (_rclpy, 'Client'),
+    (_rclpy, 'RCLError'),
+)
+
+#: Instance attributes that rclpy's ActionClient sets in its constructor, checked on each one.
+#: (``_is_feedback_ready`` and ``_is_result_response_ready`` are set by its ``is_ready``.)
+_ACTION_CLIENT_STATE = ('_action_type', '_client_handle', '_node', '_feedback_callbacks',
+                        '_pending_result_requests', '_goal_sequence_number_to_goal_id',
+                        '_result_sequence_number_to_goal_id')
+
+
+def _installed_version() -> tuple[int, ...]:
+    try:
+        text = importlib.metadata.version('rclpy')
+    except importlib.metadata.PackageNotFoundError:
+        return ()
+    return tuple(int(part) for part in text.split('.')[:2] if part.isdigit())
+
+
+def _check() -> None:
+    version = _installed_version()
+    tested = '.'.join(map(str, TESTED_RCLPY))
+    missing = [f'{getattr(owner, "__name__", owner)}.{name}' for owner, name in _REQUIRED
+               if not hasattr(owner, name)]
+    if missing:
+        raise BindingUnavailable(
+            f'rclpy {".".join(map(str, version)) or "(unknown version)"} lacks '
+            f'{", ".join(missing)}, which cft_action uses; it is tested with rclpy {tested}.x')
+    if version[:2] != TESTED_RCLPY:
+        get_logger('cft_action').warning(
+            f'rclpy {".".join(map(str, version))} is not the tested {tested}.x; the private '
+            'names cft_action uses are all present')
+
+
+_check()
+
+RCLError = _rclpy.RCLError
+
+
+class CompatActionClient(_RclpyActionClient):
+    """rclpy's ActionClient, with its private state under names of this package's own.
+
+    :class:`cft_action.ActionClient` derives from it and uses only these members.
+    """
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        missing = [name for name in _ACTION_CLIENT_STATE if not hasattr(self, name)]
+        if missing:
+            raise BindingUnavailable(
+                f'rclpy ActionClient has no {", ".join(missing)}; cft_action is tested with '
+                f'rclpy {".".join(map(str, TESTED_RCLPY))}.x')
+
+    # Read before rclpy's constructor has run (from Node.add_waitable), so no check above yet.
+    @property
+    def _cft_client_handle(self) -> Any:
+        return self._client_handle
+
+    @property
+    def _cft_action_type(self) -> Any:
+        return self._action_type
+
+    @property
+    def _cft_node(self) -> Node:
+        return self._node
+
+    @property
+    def _cft_feedback_callbacks(self) -> dict[bytes, Callable]:
+        """Goal UUID -> feedback callback; rclpy delivers feedback only to goals in here."""
+        return self._feedback_callbacks
+
+    def _cft_goal_id_of_goal_request(self, sequence_number: int) -> Any:
+        return self._goal_sequence_number_to_goal_id.get(sequence_number)
+
+    def _cft_goal_id_of_result_request(self, sequence_number: int) -> Any:
+        return self._result_sequence_number_to_goal_id.get(sequence_number)
+
+    def _cft_take_readiness(self) -> tuple[bool, bool]:
+        """``(result response ready, feedback ready)``, as the last wait found them."""
+        return self._is_result_response_ready, self._is_feedback_ready
+
+    def _cft_feedback_ready(self) -> bool:
+        return self._is_feedback_ready
+
+    def _cft_clear_readiness(self) -> None:
+        """Make rclpy's take_data take neither the result response nor the feedback."""
+        self._is_result_response_ready = self._is_feedback_ready = False
+
+    def _remove_pending_result_request(self, future: Future) -> None:
+        # rclpy's done callback of every result request.
+        self._cft_result_request_done(future)
+
+    def _cft_result_request_done(self, future: Future) -> None:
+        """A result request finished: by default as rclpy, which also forgets the callback."""
+        super()._remove_pending_result_request(future)
+
+    def _cft_forget_result_request(self, future: Future) -> Optional[Any]:
+        """Forget a finished result request, and nothing else; the goal id it was for."""
+        sequence_number = self._remove_pending_request(future, self._pending_result_requests)
+        return self._result_sequence_number_to_goal_id.pop(sequence_number, None)
+
+
+def validate_qos_or_depth(node: Node, qos_profile: Any) -> QoSProfile:
+    """A QoSProfile from a profile or a depth, as ``Node.create_subscription`` takes it."""
+    return node._validate_qos_or_depth_parameter(qos_profile)
+
+
+def validate_topic_name(node: Node, topic: str) -> None:
+    """Raise rclpy's InvalidTopicNameException for a name that does not resolve."""
+    node._validate_topic_or_service_name(topic)
+
+
+def declare_qos_parameters(node: Node, topic: str, qos_profile: QoSProfile,
+                           options: rclpy.qos_overriding_options.QoSOverridingOptions) -> None:
+    """Declare the QoS override parameters of a subscription, as ``Node.create_subscription``."""
+    rclpy.qos_overriding_options._declare_qos_parameters(
+        Subscription, node, topic, qos_profile, options)
+
+
+def new_rcl_subscription(node: Node, msg_type: Any, topic: str, qos_profile: QoSProfile) -> Any:
+    """An rcl subscription of the C extension, not yet known to the node."""
+    with node.handle:
+        return _rclpy.Subscription(node.handle, msg_type, topic, qos_profile.get_c_qos_profile())
+
+
+def register_subscription(node: Node, subscription: Subscription) -> None:
+    """Add a subscription to the node, where executors find it, and wake them."""
+    node._subscriptions.append(subscription)
+    node._wake_executor()
+
+
+def new_rcl_client(node: Node, srv_type: Any, service_name: str, qos_profile: QoSProfile) -> Any:
+    """An rcl service client of the C extension, not known to the node or any executor."""
+    with node.handle:
+        return _rclpy.Client(node.handle, srv_type, service_name,
+                             qos_profile.get_c_qos_profile())
+
+
+def set_parameter_event_callbacks(handler: _RclpyParameterEventHandler) -> Any:
+    """Give a handler rclpy's callback registry, which its inherited methods use; return it."""
+    handler._callbacks = _RclpyParameterEventHandler.Callbacks()
+    return handler._callbacks
