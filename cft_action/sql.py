@@ -27,7 +27,7 @@ it (``tests/test_topic_cli.py`` checks this against real filtered subscriptions)
   names, as Fast DDS does.
 
 Field kinds come from a *schema*, a callable that maps a field path to a :class:`Kind` (see
-:func:`cft_action.topic_tools.message_schema` for ROS messages); without one, kinds are inferred
+:func:`cft_action.message_types.message_schema` for ROS messages); without one, kinds are inferred
 from the values of each message, which cannot tell ``float32`` from ``float64``.
 """
 

@@ -12,7 +12,6 @@ executor, later changes are only in place, and ``""`` is refused.
 
 from __future__ import annotations
 
-import importlib
 import threading
 import uuid
 from typing import Callable, NamedTuple, Optional, Sequence, Union
@@ -26,9 +25,9 @@ from rclpy.qos import QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.subscription import Subscription
 from rclpy.type_support import check_is_valid_msg_type
-from rosidl_parser.definition import AbstractString, Array, BasicType, NamespacedType
 
 from cft_action import _rcl, sql
+from cft_action.message_types import first_primitive_field
 from cft_action._rclpy_compat import (declare_qos_parameters, new_rcl_subscription,
                                       register_subscription, validate_qos_or_depth,
                                       validate_topic_name)
@@ -97,21 +96,6 @@ def _apply(subscription_ptr: int, topic: str, expression: str,
                                      f'{rclpy.get_rmw_implementation_identifier()}')
 
 
-def _comparable_field(msg_type, prefix: str = '') -> Optional[str]:
-    """Return the DDS-SQL name of the first primitive field of ``msg_type``, or None."""
-    for name, slot in zip(msg_type.get_fields_and_field_types(), msg_type.SLOT_TYPES):
-        if isinstance(slot, (BasicType, AbstractString)):
-            return prefix + name
-        if isinstance(slot, Array) and isinstance(slot.value_type, (BasicType, AbstractString)):
-            return f'{prefix}{name}[0]'
-        if isinstance(slot, NamespacedType):
-            module = importlib.import_module('.'.join(slot.namespaces))
-            found = _comparable_field(getattr(module, slot.name), f'{prefix}{name}.')
-            if found:
-                return found
-    return None
-
-
 def _validate_on_probe(node: Node, msg_type, qos_profile: QoSProfile, topic: str,
                        expression: str, expression_parameters: Sequence[Literal]) -> None:
     """Let Fast DDS check ``expression`` on a throwaway reader of a private topic.
@@ -122,7 +106,7 @@ def _validate_on_probe(node: Node, msg_type, qos_profile: QoSProfile, topic: str
     construction and never matches, then the user's expression as an in-place change, which Fast
     DDS rejects cleanly. The probe's topic has no publishers, so no writer sees any of this.
     """
-    field = _comparable_field(msg_type)
+    field = first_primitive_field(msg_type)
     if field is None:
         return  # no primitive field to build a first filter on: the real call reports errors
     probe_topic = f'/_cft_action_probe/t{uuid.uuid4().hex}'

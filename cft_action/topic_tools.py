@@ -1,9 +1,9 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
-"""The machinery of ``cft-action topic echo|hz|bw``: messages as YAML, message types, and filters.
+"""The commands ``cft-action topic echo|hz|bw``: sessions, filters, rates and output.
 
-Jazzy has no ``rosidl_runtime_py`` on PyPI, so :func:`message_to_yaml` is written here once, with
-the output of ``ros2 topic echo``. :func:`message_schema` gives :mod:`cft_action.sql` the kinds of a
-message's fields, as Fast DDS sees them.
+Messages are printed by :mod:`cft_action.message_yaml`, and filters are checked against
+:func:`cft_action.message_types.message_schema`, the kinds of a message's fields as Fast DDS sees
+them.
 
 The filter of every command is applied by the middleware. If it cannot be, the command exits with
 :data:`EXIT_FILTER` and the reason, and prints no message: there is no silent fallback to unfiltered
@@ -14,25 +14,24 @@ process when the rmw implementation has no content filtering.
 from __future__ import annotations
 
 import argparse
-import array
 import copy
 import importlib
 import math
 import os
-import re
 import sys
 import time
-from collections import deque, OrderedDict
+from collections import deque
 from typing import Callable, Optional
 
-import yaml
 
 from cft_action import sql
 from cft_action.errors import CftActionError
+from cft_action.message_types import is_message, message_schema
+from cft_action.message_yaml import message_to_yaml
 
 __all__ = [
     'EXIT_ERROR', 'EXIT_FILTER', 'FilterUnavailable', 'TopicToolError', 'get_message_class',
-    'message_schema', 'message_to_ordereddict', 'message_to_yaml', 'run_bw', 'run_echo', 'run_hz',
+    'run_bw', 'run_echo', 'run_hz',
 ]
 
 #: Exit status when the filter cannot be applied (and for command-line usage errors, as argparse).
@@ -56,107 +55,6 @@ class FilterUnavailable(TopicToolError):
     """The filter cannot be applied: the command exits without printing any message."""
 
     exit_code = EXIT_FILTER
-
-
-# --- messages as YAML -----------------------------------------------------------------------------
-
-def _is_message(value) -> bool:
-    return hasattr(value, 'get_fields_and_field_types') and hasattr(value, 'SLOT_TYPES')
-
-
-def _type_name(slot) -> str:
-    from rosidl_parser.definition import (AbstractString, AbstractWString, BasicType,
-                                          NamespacedType)
-    if isinstance(slot, BasicType):
-        return slot.typename
-    if isinstance(slot, AbstractString):
-        return 'string'
-    if isinstance(slot, AbstractWString):
-        return 'wstring'
-    if isinstance(slot, NamespacedType):
-        return '/'.join(slot.namespaced_name())
-    return 'unknown'
-
-
-def _abbreviate(value, slot) -> str:
-    from rosidl_parser.definition import Array, BoundedSequence
-    name = _type_name(slot.value_type)
-    if isinstance(slot, Array):
-        return f'<array type: {name}[{slot.size}]>'
-    if isinstance(slot, BoundedSequence):
-        return f'<sequence type: {name}[{slot.maximum_size}], length: {len(value)}>'
-    return f'<sequence type: {name}, length: {len(value)}>'
-
-
-def message_to_ordereddict(msg, *, truncate_length: Optional[int] = None, no_arr: bool = False,
-                           no_str: bool = False) -> OrderedDict:
-    """Return the fields of ``msg`` as an :class:`OrderedDict`, nested messages as nested dicts.
-
-    :param truncate_length: Cut strings, bytes and arrays longer than this, marking the cut ``...``.
-    :param no_arr: Replace arrays and sequences by a description of their type and length.
-    :param no_str: Replace strings by their length.
-    """
-    result = OrderedDict()
-    for name, slot in zip(msg.get_fields_and_field_types(), msg.SLOT_TYPES):
-        result[name] = _plain(getattr(msg, name), slot, truncate_length, no_arr, no_str)
-    return result
-
-
-def _plain(value, slot, truncate_length, no_arr, no_str):
-    if isinstance(value, (bytes, bytearray)):
-        text = ''.join(chr(b) for b in value)
-        if truncate_length is not None and len(text) > truncate_length:
-            text = text[:truncate_length] + '...'
-        return text
-    if isinstance(value, str):
-        if no_str:
-            return f'<string length: <{len(value)}>>'
-        if truncate_length is not None and len(value) > truncate_length:
-            return value[:truncate_length] + '...'
-        return value
-    if hasattr(value, 'dtype') and getattr(value, 'ndim', 0) == 0:  # a numpy scalar
-        return value.item()
-    if isinstance(value, (list, tuple, array.array)) or hasattr(value, 'dtype'):  # or an ndarray
-        if no_arr and slot is not None:
-            return _abbreviate(value, slot)
-        items = list(value)
-        cut = truncate_length is not None and len(items) > truncate_length
-        if cut:
-            items = items[:truncate_length]
-        items = [_plain(v, None, truncate_length, no_arr, no_str) for v in items]
-        return items + ['...'] if cut else items
-    if isinstance(value, (bool, int, float)) or value is None:
-        return value
-    if isinstance(value, dict):
-        return OrderedDict((k, _plain(v, None, truncate_length, no_arr, no_str))
-                           for k, v in value.items())
-    if _is_message(value):
-        return message_to_ordereddict(value, truncate_length=truncate_length, no_arr=no_arr,
-                                      no_str=no_str)
-    return str(value)
-
-
-class _YamlDumper(yaml.SafeDumper):
-    """A safe dumper that keeps the order of an OrderedDict, without touching yaml's globals."""
-
-
-_YamlDumper.add_representer(
-    OrderedDict, lambda dumper, data: dumper.represent_mapping(
-        'tag:yaml.org,2002:map', data.items()))
-
-
-def message_to_yaml(msg, *, truncate_length: Optional[int] = None, no_arr: bool = False,
-                    no_str: bool = False, flow_style: bool = False) -> str:
-    """Return ``msg`` as YAML, as ``ros2 topic echo`` prints it (without the ``---`` line).
-
-    The arguments are those of :func:`message_to_ordereddict`; ``flow_style`` prints collections
-    inline.
-    """
-    return yaml.dump(
-        message_to_ordereddict(msg, truncate_length=truncate_length, no_arr=no_arr,
-                               no_str=no_str),
-        Dumper=_YamlDumper, allow_unicode=True, width=sys.maxsize, default_flow_style=flow_style,
-        sort_keys=False)
 
 
 # --- message types --------------------------------------------------------------------------------
@@ -183,94 +81,10 @@ def get_message_class(type_name: str):
         raise TopicToolError(f"The passed message type '{type_name}' is invalid: cannot import "
                              f'{package}.{interface} ({e})') from None
     msg_type = getattr(module, name, None)
-    if msg_type is None or not _is_message(msg_type):
+    if msg_type is None or not is_message(msg_type):
         raise TopicToolError(f"The passed message type '{type_name}' is invalid: {package}."
                              f'{interface} has no message {name}')
     return msg_type
-
-
-def _slot_kind(slot) -> sql.Kind:
-    from rosidl_parser.definition import AbstractString, AbstractWString, BasicType
-    if isinstance(slot, BasicType):
-        name = slot.typename
-        if name == 'boolean':
-            return sql.Kind.BOOLEAN
-        if name == 'float':
-            return sql.Kind.FLOAT32
-        if name in ('double', 'long double'):
-            return sql.Kind.FLOAT64
-        if name == 'char':
-            return sql.Kind.CHAR
-        if name == 'int8':
-            return sql.Kind.INT8_AS_OCTET
-        if name == 'wchar':
-            raise LookupError('is a wchar, which Fast DDS cannot filter on')
-        return sql.Kind.INTEGER  # octet, (u)int8 .. (u)int64
-    if isinstance(slot, AbstractString):
-        return sql.Kind.STRING
-    if isinstance(slot, AbstractWString):
-        raise LookupError('is a wstring, which Fast DDS cannot filter on')
-    raise LookupError(f'has the type {_type_name(slot)}, which is not primitive')
-
-
-def _namespaced_class(namespaces: list[str], name: str):
-    """The Python class of a rosidl type, for messages and the parts of services and actions.
-
-    ``test_msgs/action/Fibonacci_Feedback`` is not an attribute of ``test_msgs.action``, only of
-    its generated module ``test_msgs.action._fibonacci`` (the action's name in snake case).
-    """
-    package = importlib.import_module('.'.join(namespaces))
-    if hasattr(package, name):
-        return getattr(package, name)
-    interface = name.split('_', 1)[0]
-    snake = re.sub(r'(?<=[a-z0-9])([A-Z])|(?<=[A-Z])([A-Z])(?=[a-z])', r'_\1\2', interface)
-    module = importlib.import_module(f'{package.__name__}._{snake.lower()}')
-    return getattr(module, name)
-
-
-def message_schema(msg_type) -> sql.Schema:
-    """The :data:`cft_action.sql.Schema` of a ROS message type: the kind of each field path.
-
-    It applies Fast DDS's rules: arrays and sequences must be indexed, a fixed-size array's index
-    must be within its size, and the field at the end of the path must be primitive.
-    """
-    from rosidl_parser.definition import AbstractNestedType, Array, NamespacedType
-
-    def kind_of(path: sql.FieldPath) -> sql.Kind:
-        current = msg_type
-        for step, (name, index) in enumerate(path):
-            fields = list(current.get_fields_and_field_types())
-            if name not in fields:
-                raise LookupError(f'field not found: {current.__name__} has the fields '
-                                  f'{", ".join(fields)}')
-            slot = current.SLOT_TYPES[fields.index(name)]
-            if isinstance(slot, AbstractNestedType):
-                if index is None:
-                    raise LookupError(f'{name} is an array or sequence, so it needs an index, '
-                                      f'as in {name}[0]')
-                if isinstance(slot, Array) and index >= slot.size:
-                    raise LookupError(f'index {index} is greater than maximum size: {name} has '
-                                      f'{slot.size} elements')
-                slot = slot.value_type
-            elif index is not None:
-                raise LookupError(f'{name} is not an array or sequence')
-            last = step == len(path) - 1
-            if isinstance(slot, NamespacedType):
-                if last:
-                    raise LookupError(f"is a message ({'/'.join(slot.namespaced_name())}), not "
-                                      'a primitive value: name one of its fields')
-                current = _namespaced_class(slot.namespaces, slot.name)
-            elif not last:
-                raise LookupError(f'{name} is not a message, so it has no field '
-                                  f'{path[step + 1][0]}')
-            else:
-                try:
-                    return _slot_kind(slot)
-                except LookupError as e:
-                    raise LookupError(f'{name} {e}') from None
-        raise LookupError('empty field name')
-
-    return kind_of
 
 
 # --- the commands ---------------------------------------------------------------------------------

@@ -29,7 +29,7 @@ from test_msgs.action import Fibonacci
 
 from cft_action import create_filtered_subscription, guard, set_content_filter, sql
 from cft_action.filters import MATCH_ALL, NEVER_MATCH, any_of, uuid_prefix_term
-from cft_action.topic_tools import message_schema
+from cft_action.message_types import message_schema
 from harness.ros import unique_name
 from tests.support import helper_process
 

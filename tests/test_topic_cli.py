@@ -27,7 +27,8 @@ from test_msgs.msg import Arrays, BasicTypes, UnboundedSequences
 
 from cft_action import ContentFilterError, create_filtered_subscription, sql
 from cft_action.filters import dds_literals
-from cft_action.topic_tools import message_schema, message_to_yaml
+from cft_action.message_types import message_schema
+from cft_action.message_yaml import message_to_yaml
 from harness.proc import Proc
 from harness.ros import unique_name
 from tests.support import helper_process
