@@ -114,10 +114,20 @@ class CountingActionServer(ActionServer):
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         self.request_lock = threading.Lock()
         self.requests: dict[str, str] = {}  # goal UUID (hex) -> 'taken', 'sent' or 'failed'
+        self.takes: list[tuple[str, float]] = []  # (goal UUID (hex), time.monotonic()) per take
         self.counts = {'goal_requests': 0, 'goal_responses': 0, 'goal_response_errors': 0}
         self._failed_send = threading.local()
         super().__init__(*args, **kwargs)
         self._logger = _CountingLogger(self._logger, self._note_failed_send)
+
+    def take_data(self) -> dict:
+        """Take as rclpy does, and note when a goal request left rmw's queue."""
+        data = super().take_data()
+        if 'goal' in data:
+            key = bytes(data['goal'][1].goal_id.uuid).hex()
+            with self.request_lock:
+                self.takes.append((key, time.monotonic()))
+        return data
 
     def _note_failed_send(self) -> None:
         self._failed_send.value = True
@@ -331,6 +341,11 @@ def main(argv: list[str]) -> None:
                 states = json.dumps(server.server.requests)
             with out:
                 print('REQUESTS ' + states, flush=True)
+        elif line.strip() == 'takes':
+            with server.server.request_lock:
+                takes = json.dumps(server.server.takes)
+            with out:
+                print('TAKES ' + takes, flush=True)
     # Stop every thread that calls into rclpy, then leave without interpreter finalization: a
     # daemon thread that re-enters Python during finalization is ended by pthread_exit, whose
     # unwinding through rclpy's C++ frames calls std::terminate (SIGABRT): a crash watcher would
