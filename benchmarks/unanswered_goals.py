@@ -2,7 +2,7 @@
 """Goals that are never answered: a burst of goals right after ``wait_for_server()``.
 
 Usage: ``python -m benchmarks.unanswered_goals [--runs N] [--configs rclpy,client]
-[--depth default|1000] [--clients 3] [--goals 8] [--spin thread|inline] [--out FILE]``
+[--depth default|1000] [--server-depth N] [--clients 3] [--goals 8] [--spin thread|inline] [--out FILE]``
 
 Per run, one guarded server (``cft-action guard -- python -m harness.server --executor multi``,
 feedback every 20 ms) starts, then ``--clients`` client processes at once. Each creates its action
@@ -23,6 +23,11 @@ whether it took the request and sent the response, or failed to send it (``harne
   client's response reader within its wait: "client will not receive response");
 - ``sent, not received``: sent, but the client's action client never saw it;
 - ``taken, not answered``: the server still works on it.
+
+``--server-depth`` gives the server's goal service another depth than the clients' (a control that
+tells the server's request reader from the clients' queues). The server also reports the order and
+time (``time.monotonic()``, system-wide) in which it took the requests, and each client the time
+of each ``send_goal_async`` call (a held ``client``-mode request leaves later).
 
 Configurations alternate within each run index. Every process has ``ROS_DOMAIN_ID`` ``--domain``
 (97) and localhost-only discovery; every wait is bounded and every process is stopped.
@@ -138,7 +143,7 @@ def role_client(action: str, config: str, goals: int, depth: str, spin: str,
         callback = None if i == 1 else (lambda _msg: None)
         future = client.send_goal_async(Fibonacci.Goal(order=ORDER), callback, goal_uuid=goal_uuid)
         record = {'i': i, 'explicit_uuid': i == 0, 'callback': callback is not None,
-                  'future': future}
+                  'called_t': time.monotonic(), 'future': future}
         records.append(record)
         future.add_done_callback(on_response(record))
     deadline = time.monotonic() + timeout
@@ -208,8 +213,9 @@ def one_run(opts: argparse.Namespace, config: str, env: dict[str, str]) -> dict[
     """One server, ``opts.clients`` clients at once; what each goal got."""
     action = f'/cft_unanswered_{uuid.uuid4().hex[:8]}'
     server_args = ['--executor', 'multi']
-    if opts.depth != 'default':
-        server_args += ['--goal-depth', opts.depth]
+    server_depth = opts.server_depth or opts.depth
+    if server_depth != 'default':
+        server_args += ['--goal-depth', server_depth]
     server = Proc('server', [*guard_command(), *python_module(
         'harness.server', action, PERIOD_S, *server_args)], env,
         cwd=tempfile.mkdtemp(prefix='cft_unanswered_'), core=True)
@@ -235,6 +241,7 @@ def one_run(opts: argparse.Namespace, config: str, env: dict[str, str]) -> dict[
             run['backtraces'] = {str(pid): backtrace(pid) for pid in stuck[:1]}
         requests = server.request_json('requests', 'REQUESTS', 30.0)
         stats = server.request_json('stats', 'STATS', 30.0)
+        run['takes'] = server.request_json('takes', 'TAKES', 30.0)
         run['server'] = {k: stats.get(k) for k in (
             'goal_requests', 'goal_responses', 'goal_response_errors', 'accepted', 'published')}
         run['server']['alive'] = server.poll() is None
@@ -272,6 +279,22 @@ def classify(goal: dict[str, Any]) -> str:
             'taken': 'taken, not answered'}.get(goal.get('server', ''), goal.get('server', '?'))
 
 
+def pattern(goal: dict[str, Any], goals: list[dict[str, Any]]) -> str:
+    """Where an unanswered goal sits among its client's goals, by what the server took.
+
+    ``gap``: a later goal of the same client was taken, so the request writer and the server's
+    request reader had matched before it: only an overflow loses it then. ``prefix``: no earlier
+    goal of the client was taken but a later one was. ``all``: none of the client's goals was
+    taken. ``tail``: an earlier one was taken, no later one.
+    """
+    taken = [g['server'] != 'not taken' for g in goals]
+    i = goal['i']
+    before, after = any(taken[:i]), any(taken[i + 1:])
+    if after:
+        return 'gap' if before else 'prefix'
+    return 'tail' if before else 'all'
+
+
 def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
     """Per configuration: runs, runs with an unanswered goal, clients and goals, by cause."""
     out: dict[str, Any] = {}
@@ -281,7 +304,7 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
                                            'clients_all_unanswered': 0, 'goals': 0,
                                            'unanswered': 0, 'causes': {},
                                            'responses_ignored': 0, 'send_errors': 0,
-                                           'server_requests_short': 0})
+                                           'server_requests_short': 0, 'patterns': {}})
         s['runs'] += 1
         if 'error' in run or any('error' in c for c in run.get('clients', [])):
             s['errors'] += 1
@@ -299,6 +322,8 @@ def summarize(runs: list[dict[str, Any]]) -> dict[str, Any]:
             for goal in missing:
                 cause = classify(goal)
                 s['causes'][cause] = s['causes'].get(cause, 0) + 1
+                shape = pattern(goal, goals)
+                s['patterns'][shape] = s['patterns'].get(shape, 0) + 1
         server = run.get('server', {})
         s['send_errors'] += server.get('goal_response_errors') or 0
         expected = sum(len(c.get('goals', [])) for c in run.get('clients', []))
@@ -319,12 +344,25 @@ def fisher_two_sided(a: int, b: int, c: int, d: int) -> float:
     return min(1.0, sum(p(x) for x in range(low, high + 1) if p(x) <= observed * (1 + 1e-9)))
 
 
+def with_fisher(summary: dict[str, Any]) -> dict[str, Any]:
+    """The summary, with Fisher's exact test on runs with an unanswered goal if two configs."""
+    if len(summary) == 2:
+        (x, sx), (y, sy) = summary.items()
+        summary['fisher_runs_with_unanswered'] = {
+            'configs': [x, y], 'p_two_sided': fisher_two_sided(
+                sx['runs_with_unanswered'], sx['runs'] - sx['runs_with_unanswered'],
+                sy['runs_with_unanswered'], sy['runs'] - sy['runs_with_unanswered'])}
+    return summary
+
+
 def parse_args(argv: list[str]) -> argparse.Namespace:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--runs', type=int, default=30, help='runs per configuration')
     parser.add_argument('--configs', default='rclpy,client', help='rclpy, client, goals')
     parser.add_argument('--depth', default='default',
                         help="the goal service's depth, both sides: 'default' (keep-last 10) or N")
+    parser.add_argument('--server-depth',
+                        help="the server's goal service depth, if not --depth's (a split control)")
     parser.add_argument('--clients', type=int, default=3)
     parser.add_argument('--goals', type=int, default=8, help='goals per client')
     parser.add_argument('--spin', choices=['thread', 'inline'], default='thread')
@@ -333,6 +371,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--domain', type=int, default=97, help='ROS_DOMAIN_ID of every process')
     parser.add_argument('--gdb', action='store_true', help='backtrace the first stuck client')
     parser.add_argument('--out', help='write the JSON here')
+    parser.add_argument('--summarize', nargs='+', metavar='JSON',
+                        help='run nothing: summarize the runs of these result files together')
     return parser.parse_args(argv)
 
 
@@ -341,6 +381,10 @@ def main(argv: Optional[list[str]] = None) -> int:
     if argv and argv[0] == '_role':
         return run_role(argv[1:], ROLES)
     opts = parse_args(argv)
+    if opts.summarize:
+        runs = [run for path in opts.summarize for run in json.loads(Path(path).read_text())['runs']]
+        say(json.dumps(with_fisher(summarize(runs)), indent=1))
+        return 0
     configs = opts.configs.split(',')
     env = plain_env(opts.domain)
     header = {'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M'),
@@ -358,13 +402,7 @@ def main(argv: Optional[list[str]] = None) -> int:
                        for g in client.get('goals', []) if 'response_s' not in g]
             say(f'run {n} {config}: {run.get("server", {})} unanswered: {missing or "none"}'
                 + (f' ERROR {run["error"][:300]}' if 'error' in run else ''))
-    summary = summarize(runs)
-    if len(configs) == 2:
-        (x, sx), (y, sy) = summary.items()
-        summary['fisher_runs_with_unanswered'] = {
-            'configs': [x, y], 'p_two_sided': fisher_two_sided(
-                sx['runs_with_unanswered'], sx['runs'] - sx['runs_with_unanswered'],
-                sy['runs_with_unanswered'], sy['runs'] - sy['runs_with_unanswered'])}
+    summary = with_fisher(summarize(runs))
     header['finished_utc'] = datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M')
     result = {'header': header, 'summary': summary, 'runs': runs}
     if opts.out:
