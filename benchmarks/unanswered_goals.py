@@ -2,7 +2,8 @@
 """Goals that are never answered: a burst of goals right after ``wait_for_server()``.
 
 Usage: ``python -m benchmarks.unanswered_goals [--runs N] [--configs rclpy,client]
-[--depth default|1000] [--server-depth N] [--clients 3] [--goals 8] [--spin thread|inline] [--out FILE]``
+[--depth default|1000] [--server-depth N] [--clients 3] [--goals 8] [--spin thread|inline]
+[--out FILE] [--summarize JSON...]``
 
 Per run, one guarded server (``cft-action guard -- python -m harness.server --executor multi``,
 feedback every 20 ms) starts, then ``--clients`` client processes at once. Each creates its action
@@ -196,7 +197,7 @@ def _forwards_to(source: Any, target: Any) -> bool:
 
 def _cell_filled(cell: Any) -> bool:
     try:
-        cell.cell_contents
+        _ = cell.cell_contents
     except ValueError:
         return False
     return True
@@ -245,7 +246,8 @@ def one_run(opts: argparse.Namespace, config: str, env: dict[str, str]) -> dict[
         run['server'] = {k: stats.get(k) for k in (
             'goal_requests', 'goal_responses', 'goal_response_errors', 'accepted', 'published')}
         run['server']['alive'] = server.poll() is None
-        run['server']['warnings'] = [ln for ln in server.lines if 'WARN' in ln or 'ERROR' in ln][:20]
+        run['server']['warnings'] = [
+            ln for ln in server.lines if 'WARN' in ln or 'ERROR' in ln][:20]
         for proc, rep in zip(clients, reports):
             rep['warnings'] = [ln for ln in proc.lines if 'WARN' in ln or 'ERROR' in ln][:20]
             for goal in rep.get('goals', []):
@@ -382,7 +384,8 @@ def main(argv: Optional[list[str]] = None) -> int:
         return run_role(argv[1:], ROLES)
     opts = parse_args(argv)
     if opts.summarize:
-        runs = [run for path in opts.summarize for run in json.loads(Path(path).read_text())['runs']]
+        runs = [run for path in opts.summarize
+                for run in json.loads(Path(path).read_text())['runs']]
         say(json.dumps(with_fisher(summarize(runs)), indent=1))
         return 0
     configs = opts.configs.split(',')
