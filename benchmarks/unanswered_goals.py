@@ -148,7 +148,9 @@ def role_client(action: str, config: str, goals: int, depth: str, spin: str,
         records.append(record)
         future.add_done_callback(on_response(record))
     deadline = time.monotonic() + timeout
-    while time.monotonic() < deadline and not all(r['future'].done() for r in records):
+    # Wait for the done callbacks, not the futures: a future's callbacks run as executor tasks,
+    # which an inline loop that stopped at the last done future would never spin.
+    while time.monotonic() < deadline and not all('response_s' in r for r in records):
         if spinner is None:
             executor.spin_once(timeout_sec=0.05)
         else:
