@@ -2,7 +2,7 @@
 """The Fibonacci action server of every demo, benchmark and test, in a process of its own.
 
 Usage: ``python -m harness.server ACTION PERIOD_S [--pad N] [--depth N|all] [--result-timeout S]
-[--stats-every S] [--late-feedback S] [--executor single|multi]``
+[--stats-every S] [--late-feedback S] [--executor single|multi] [--goal-depth N]``
 
 Goal ``order`` is the number of feedback messages the goal gets (a negative order is rejected;
 cancels are accepted). Each feedback ``sequence`` is ``[k, seconds, nanoseconds] + [0] * PAD``:
@@ -21,13 +21,16 @@ Execute callbacks are coroutines, so one single-threaded executor serves any num
 
 Queues: ``--depth N`` makes every queue keep-last N, reliable; ``--depth all`` keep-all (with a
 1000-sample resource hint), which tests use so that nothing is dropped on a loaded machine; without
-``--depth``, rclpy's defaults (keep-last 10), as an ordinary server has.
+``--depth``, rclpy's defaults (keep-last 10), as an ordinary server has. ``--goal-depth N`` makes
+the goal service alone keep-last N, reliable.
 
 Lines it prints: ``STATUS <guard active> <guard status>`` and ``READY`` at start; ``STATS <json>``
 in reply to the command ``stats`` on stdin, and every ``--stats-every`` seconds if given (a crash
 watcher then has the counters from just before a crash). The JSON holds ``t`` (monotonic seconds),
 ``published`` (feedback messages), ``accepted`` (goals), ``active`` (goals still running),
 ``late_ticks`` (ticks that started more than a period late: the server could not keep the rate),
+``goal_requests``, ``goal_responses`` and ``goal_response_errors`` (goal requests taken from rcl,
+goal responses sent, and sends that failed: rclpy logs those and drops the goal),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
 line), ``guard_calls`` and ``guard_filter`` (its call and filter-verdict counters) and ``writers`` (the GUIDs of the feedback and status
@@ -83,13 +86,74 @@ def queue_kwargs(depth: Optional[str], side: str = 'pub') -> dict[str, QoSProfil
     return {name: profile for name in names}
 
 
+#: The warning with which rclpy's ActionServer drops a goal whose response it could not send.
+_SEND_FAILED = 'Failed to send goal response'
+
+
+class _CountingLogger:
+    """An rclpy logger that counts the ActionServer's failed goal-response sends."""
+
+    def __init__(self, logger: Any, on_failed: Any) -> None:
+        self._logger = logger
+        self._on_failed = on_failed
+
+    def warn(self, message: str, *args: Any, **kwargs: Any) -> Any:
+        if str(message).startswith(_SEND_FAILED):
+            self._on_failed()
+        return self._logger.warn(message, *args, **kwargs)
+
+    warning = warn
+
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self._logger, name)
+
+
+class CountingActionServer(ActionServer):
+    """An rclpy ActionServer that records, per goal UUID, whether its goal response went out."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        self.request_lock = threading.Lock()
+        self.requests: dict[str, str] = {}  # goal UUID (hex) -> 'taken', 'sent' or 'failed'
+        self.takes: list[tuple[str, float]] = []  # (goal UUID (hex), time.monotonic()) per take
+        self.counts = {'goal_requests': 0, 'goal_responses': 0, 'goal_response_errors': 0}
+        self._failed_send = threading.local()
+        super().__init__(*args, **kwargs)
+        self._logger = _CountingLogger(self._logger, self._note_failed_send)
+
+    def take_data(self) -> dict:
+        """Take as rclpy does, and note when a goal request left rmw's queue."""
+        data = super().take_data()
+        if 'goal' in data:
+            key = bytes(data['goal'][1].goal_id.uuid).hex()
+            with self.request_lock:
+                self.takes.append((key, time.monotonic()))
+        return data
+
+    def _note_failed_send(self) -> None:
+        self._failed_send.value = True
+
+    async def _execute_goal_request(self, request_header_and_message: Any) -> None:
+        key = bytes(request_header_and_message[1].goal_id.uuid).hex()
+        with self.request_lock:
+            self.counts['goal_requests'] += 1
+            self.requests[key] = 'taken'
+        # The response is sent before the coroutine's first await that can suspend it (the goal
+        # callback is synchronous here), so the flag is this request's.
+        self._failed_send.value = False
+        await super()._execute_goal_request(request_header_and_message)
+        failed = getattr(self._failed_send, 'value', False)
+        with self.request_lock:
+            self.counts['goal_response_errors' if failed else 'goal_responses'] += 1
+            self.requests[key] = 'failed' if failed else 'sent'
+
+
 class TickingServer:
     """Action server that publishes ``order`` time-stamped feedback messages per goal."""
 
     def __init__(self, node: Node, executor: Executor, action: str, period: float,
                  pad: int = 0, depth: Optional[str] = None,
                  result_timeout: int = DEFAULT_RESULT_TIMEOUT_S,
-                 late_feedback: float = 0.0) -> None:
+                 late_feedback: float = 0.0, goal_depth: Optional[int] = None) -> None:
         """Create the action server on ``node`` and start the ticker thread."""
         self.executor = executor
         self.period = period
@@ -109,11 +173,14 @@ class TickingServer:
         self.intervals = 0
         self.interval_s = 0.0
         self.running = True
-        self.server = ActionServer(
+        qos = queue_kwargs(depth)
+        if goal_depth is not None:
+            qos['goal_service_qos_profile'] = QoSProfile(
+                depth=goal_depth, reliability=ReliabilityPolicy.RELIABLE)
+        self.server = CountingActionServer(
             node, Fibonacci, action, execute_callback=self.execute, goal_callback=self.on_goal,
             cancel_callback=lambda _: CancelResponse.ACCEPT,
-            callback_group=ReentrantCallbackGroup(), result_timeout=result_timeout,
-            **queue_kwargs(depth))
+            callback_group=ReentrantCallbackGroup(), result_timeout=result_timeout, **qos)
         self.ticker = threading.Thread(target=self.tick, daemon=True)
         self.ticker.start()
 
@@ -200,8 +267,10 @@ class TickingServer:
     def stats(self) -> dict[str, Any]:
         """Counters for the ``stats`` command."""
         usage = resource.getrusage(resource.RUSAGE_SELF)
+        with self.server.request_lock:
+            requests = dict(self.server.counts)
         with self.lock:
-            return {'t': time.monotonic(), 'published': self.published,
+            return {**requests, 't': time.monotonic(), 'published': self.published,
                     'accepted': self.accepted, 'active': len(self.active),
                     'late_ticks': self.late_ticks, 'intervals': self.intervals,
                     'interval_s': self.interval_s, 'cpu_s': usage.ru_utime + usage.ru_stime,
@@ -224,6 +293,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                              "goal's success, as a sample resent after a loss arrives late")
     parser.add_argument('--executor', choices=['single', 'multi'], default='single',
                         help='SingleThreadedExecutor (default) or MultiThreadedExecutor')
+    parser.add_argument('--goal-depth', type=int,
+                        help="the goal service's depth alone (keep-last, reliable)")
     return parser.parse_args(argv)
 
 
@@ -235,7 +306,7 @@ def main(argv: list[str]) -> None:
     executor = MultiThreadedExecutor() if args.executor == 'multi' else SingleThreadedExecutor()
     executor.add_node(node)
     server = TickingServer(node, executor, args.action, args.period, args.pad, args.depth,
-                           args.result_timeout, args.late_feedback)
+                           args.result_timeout, args.late_feedback, args.goal_depth)
     # The RTPS GUIDs of the feedback and status writers, to tell their packets apart on the wire.
     writers = {name: [bytes(info.endpoint_gid).hex() for info in
                       node.get_publishers_info_by_topic(f'{args.action}/_action/{name}')]
@@ -265,6 +336,16 @@ def main(argv: list[str]) -> None:
                 counts = json.dumps(server.published_per_goal)
             with out:
                 print('GOALS ' + counts, flush=True)
+        elif line.strip() == 'requests':
+            with server.server.request_lock:
+                states = json.dumps(server.server.requests)
+            with out:
+                print('REQUESTS ' + states, flush=True)
+        elif line.strip() == 'takes':
+            with server.server.request_lock:
+                takes = json.dumps(server.server.takes)
+            with out:
+                print('TAKES ' + takes, flush=True)
     # Stop every thread that calls into rclpy, then leave without interpreter finalization: a
     # daemon thread that re-enters Python during finalization is ended by pthread_exit, whose
     # unwinding through rclpy's C++ frames calls std::terminate (SIGABRT): a crash watcher would
