@@ -11,6 +11,7 @@ import os
 import queue
 import random
 import re
+import shutil
 import signal
 import subprocess
 import sys
@@ -44,8 +45,24 @@ RELIABLE = ['--qos-reliability', 'reliable', '--qos-depth', '1000']
 BURST = 30
 
 
+def _backtrace(pid: int) -> str:
+    """The threads of a process that did not end, from gdb if it is installed: what it waits on."""
+    if shutil.which('gdb') is None:
+        return ''
+    try:
+        result = subprocess.run(
+            ['gdb', '-q', '-batch', '-p', str(pid), '-ex', 'thread apply all bt 25'],
+            capture_output=True, text=True, timeout=60)
+    except subprocess.TimeoutExpired:
+        return '\n(gdb timed out)'
+    frames = [line for line in result.stdout.splitlines() if line.startswith(('Thread ', '#'))]
+    return '\nthreads of the process that did not end:\n' + '\n'.join(frames)[-12000:]
+
+
 class Cli:
     """One CLI process; its stdout and stderr are collected as they come."""
+
+    backtrace = ''
 
     def __init__(self, *args: str, command: Sequence[str] = CLI) -> None:
         self.proc = subprocess.Popen(
@@ -93,6 +110,7 @@ class Cli:
         try:
             return self.wait(timeout)
         except subprocess.TimeoutExpired:
+            self.backtrace = _backtrace(self.proc.pid)
             self.proc.kill()
             self.wait(timeout)
             return None
@@ -102,7 +120,7 @@ class Cli:
 
     def log(self) -> str:
         return 'stdout:\n' + '\n'.join(self.stdout[-20:]) + '\nstderr:\n' + '\n'.join(
-            self.stderr[-20:])
+            self.stderr[-20:]) + self.backtrace
 
 
 def run_cli(*args: str, command: Sequence[str] = CLI, timeout: float = 30) -> Cli:
