@@ -247,7 +247,7 @@ def set_content_filter(subscription_ptr: int, expression: str,
     run while Fast DDS replaces it; if it cannot be, a warning says why, once per process.
     """
     _check_subscription(subscription_ptr)
-    _warn_once_without_reader_lock()
+    _install_reader_lock_once()
     encoded = [p.encode() for p in parameters]
     argv = (ctypes.c_char_p * max(1, len(encoded)))(*encoded)
     options = _lib.rcl_get_zero_initialized_subscription_content_filter_options()
@@ -259,16 +259,18 @@ def set_content_filter(subscription_ptr: int, expression: str,
         _lib.rcl_subscription_content_filter_options_fini(subscription_ptr, ctypes.byref(options))
 
 
-_reader_lock_warned = False
+_reader_lock_tried = False
 
 
-def _warn_once_without_reader_lock() -> None:
-    global _reader_lock_warned
-    if _reader_lock_warned or 'fastrtps' not in get_rmw_implementation_identifier():
+def _install_reader_lock_once() -> None:
+    global _reader_lock_tried
+    if _reader_lock_tried:
+        return
+    _reader_lock_tried = True
+    if 'fastrtps' not in get_rmw_implementation_identifier():
         return  # the hazard is Fast DDS's
     reason = reader_lock_status()
     if reason:
-        _reader_lock_warned = True
         get_logger('cft_action').warning(
             'filter changes are not serialized with the reader\'s own filter evaluation, which '
             f'can crash this process under Fast DDS: {reason}')

@@ -14,14 +14,14 @@ polls it in a blocking loop, the action client from a timer of its own callback 
 
 from __future__ import annotations
 
-from typing import Any, Optional
+from typing import Any, Optional, Sequence
 
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_services_default
 
 from cft_action._rclpy_compat import new_rcl_client
 
-__all__ = ['GUID_PREFIX_LEN', 'ServiceProbe', 'participant_of']
+__all__ = ['GUID_PREFIX_LEN', 'ServiceProbe', 'node_participant', 'participant_of']
 
 #: The length of a GUID prefix, which names the participant, at the start of an endpoint GID.
 GUID_PREFIX_LEN = 12
@@ -39,6 +39,21 @@ PROBE_MAX_RESEND_S = 0.5
 def participant_of(endpoint_gid: Any) -> bytes:
     """The GUID prefix of an endpoint's GID (a ``TopicEndpointInfo.endpoint_gid``)."""
     return bytes(endpoint_gid[:GUID_PREFIX_LEN])
+
+
+def node_participant(node: Node, topics: Sequence[str]) -> Optional[bytes]:
+    """The participant of ``node``: that of one of its endpoints on ``topics``, or None if none.
+
+    A node's own endpoints are in the graph as soon as they exist; every node of a context shares
+    one participant.
+    """
+    name, namespace = node.get_name(), node.get_namespace()
+    for topic in topics:
+        for info in (*node.get_publishers_info_by_topic(topic),
+                     *node.get_subscriptions_info_by_topic(topic)):
+            if (info.node_name, info.node_namespace) == (name, namespace):
+                return participant_of(info.endpoint_gid)
+    return None
 
 
 class ServiceProbe:
@@ -90,11 +105,6 @@ class ServiceProbe:
             if self._client.service_server_is_available():
                 self._client.send_request(self._request)
                 self._sent_at = now
-
-    @property
-    def sent(self) -> bool:
-        """Whether the request has been sent at least once."""
-        return self._sent_at is not None
 
     def destroy(self) -> None:
         """Destroy the probe's client."""

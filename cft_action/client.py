@@ -30,7 +30,7 @@ from unique_identifier_msgs.msg import UUID
 
 from cft_action import _rcl
 from cft_action._rclpy_compat import CompatActionClient
-from cft_action.arrival import participant_of, ServiceProbe
+from cft_action.arrival import node_participant, participant_of, ServiceProbe
 from cft_action.errors import InvalidArgumentError
 from cft_action.filters import MATCH_ALL
 from cft_action.goal_filter import ExpressionTooLong, GoalFilterPlan, MODES, random_uuid4
@@ -421,12 +421,8 @@ class ActionClient(CompatActionClient):
         """
         topic = f'{self._resolved_action_name}/_action/feedback'
         if self._own_participant is None:
-            name, namespace = self._cft_node.get_name(), self._cft_node.get_namespace()
-            for info in self._cft_node.get_subscriptions_info_by_topic(topic):
-                if (info.node_name, info.node_namespace) == (name, namespace):
-                    self._own_participant = participant_of(info.endpoint_gid)
-                    break
-            else:
+            self._own_participant = node_participant(self._cft_node, [topic])
+            if self._own_participant is None:
                 return True  # not seen ourselves yet: ask for the proof rather than guess
         return any(participant_of(info.endpoint_gid) != self._own_participant
                    for info in self._cft_node.get_publishers_info_by_topic(topic))

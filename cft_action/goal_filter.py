@@ -137,8 +137,9 @@ class GoalFilterPlan:
         """
         if self.tag is not None and goal_uuid.startswith(self.tag):
             return 1
-        return min((revision for prefix, revision in self._added_in.items()
-                    if goal_uuid.startswith(prefix)), default=0)
+        # A term is a generated UUID's first TERM_BYTES bytes, or a supplied UUID whole.
+        return min((self._added_in[prefix] for prefix in (goal_uuid[:TERM_BYTES], goal_uuid)
+                    if prefix in self._added_in), default=0)
 
     def finish(self, goal_uuid: bytes) -> None:
         """Forget a goal: its term is dropped with the next update or shrink."""

@@ -75,7 +75,7 @@ from rclpy.subscription import Subscription
 
 from cft_action._rcl import ContentFilterError
 from cft_action._rclpy_compat import set_parameter_event_callbacks
-from cft_action.arrival import participant_of, ServiceProbe
+from cft_action.arrival import node_participant, participant_of, ServiceProbe
 from cft_action.filters import dds_literal, dds_literals, Literal, never_match_on
 from cft_action.subscription import (
     ContentFilterOptions,
@@ -614,11 +614,12 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         probes: dict[str, tuple[bytes, ServiceProbe]] = {}  # service -> (participant, probe)
         turns: dict[bytes, tuple[int, float]] = {}  # participant -> (node index, since when)
         answered: set[bytes] = set()
+        own = node_participant(self.node, (PARAMETER_EVENTS_TOPIC, '/rosout'))
         try:
             while True:
                 now = time.monotonic()
                 pending = {participant: services
-                           for participant, services in self._probe_services().items()
+                           for participant, services in self._probe_services(own).items()
                            if participant not in answered}
                 for participant, services in pending.items():
                     self._probe(participant, services, probes, turns, now)
@@ -640,20 +641,15 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             self._publish_state()
         return True
 
-    def _probe_services(self) -> dict[bytes, list[str]]:
-        """Map each other participant with a parameter event publisher to its nodes' services.
+    def _probe_services(self, own: Optional[bytes]) -> dict[bytes, list[str]]:
+        """Map each participant but ``own`` with a parameter event publisher to its nodes' services.
 
         A participant whose nodes' names are not known yet maps to no service: it stays pending.
         """
-        name, namespace = self.node.get_name(), self.node.get_namespace()
-        own = {participant_of(info.endpoint_gid)
-               for topic in (PARAMETER_EVENTS_TOPIC, '/rosout')
-               for info in self.node.get_publishers_info_by_topic(topic)
-               if (info.node_name, info.node_namespace) == (name, namespace)}
         services: dict[bytes, list[str]] = {}
         for info in self.node.get_publishers_info_by_topic(PARAMETER_EVENTS_TOPIC):
             participant = participant_of(info.endpoint_gid)
-            if participant in own:
+            if participant == own:
                 continue
             candidates = services.setdefault(participant, [])
             if info.node_name.startswith('_NODE_') or info.node_namespace.startswith('_NODE_'):
