@@ -17,7 +17,6 @@ rclpy's contract.
 from __future__ import annotations
 
 import os
-import threading
 import time
 from typing import Any, Callable, NamedTuple, Optional
 
@@ -29,10 +28,11 @@ from rclpy.task import Future
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import _rcl
+from cft_action._filtered_reader import FilteredReader
 from cft_action._rclpy_compat import CompatActionClient
 from cft_action.arrival import node_participant, participant_of, ServiceProbe
 from cft_action.errors import InvalidArgumentError
-from cft_action.filters import MATCH_ALL
+from cft_action.filters import ContentFilterOptions, MATCH_ALL
 from cft_action.goal_filter import ExpressionTooLong, GoalFilterPlan, MODES, random_uuid4
 from cft_action.subscription import is_content_filter_supported
 
@@ -183,11 +183,12 @@ class ActionClient(CompatActionClient):
         """
         mode = _resolve_mode(feedback_filter, enable_feedback_msg_optimization)
         self._cft_logger = node.get_logger().get_child('cft_action')
-        self._filter_lock = threading.RLock()
-        self._plan: Optional[GoalFilterPlan] = None
-        self._feedback_ptr = 0  # the feedback rcl_subscription_t*, once the filter is installed
-        self._state = FeedbackFilterState(mode, False, '', '', 0, 0, 0, 0)
-        self._installed = False
+        self._mode = mode
+        self._reader = FilteredReader(
+            self._cft_logger, match_all=MATCH_ALL,
+            unfiltered='feedback filter not used, all feedback is received as with rclpy')
+        self._plan: Optional[GoalFilterPlan] = None  # None: the filter is not (or no longer) used
+        self._install_ran = False
         self._finished: dict[bytes, float] = {}  # goal UUID -> when it finished
         self._last_activity = time.monotonic()
         self._logged_explicit_uuid = False
@@ -251,8 +252,8 @@ class ActionClient(CompatActionClient):
                 del node.add_waitable
             else:
                 node.add_waitable = shadowed  # type: ignore[method-assign]
-        if not self._installed:
-            self._fall_back('rclpy did not add the client through Node.add_waitable')
+        if not self._install_ran:
+            self._reader.fall_back('rclpy did not add the client through Node.add_waitable')
 
     def _locate_entities(self, resolved_action_name: str) -> None:
         """Find the feedback subscription and result client inside rcl's action client."""
@@ -272,68 +273,48 @@ class ActionClient(CompatActionClient):
             self._cft_action_type.Impl.GetResultService.Response)
 
     def _install_filter(self) -> None:
-        self._installed = True
-        mode = self._state.mode
-        if mode == 'off':
-            self._fall_back('feedback_filter is off', log=False)
+        self._install_ran = True
+        if self._mode == 'off':
+            self._reader.fall_back('feedback_filter is off', log=False)
             return
         if not is_content_filter_supported(self._cft_node):
-            self._fall_back('the rmw implementation has no content filter')
+            self._reader.fall_back('the rmw implementation has no content filter')
             return
         pointer = self._feedback_subscription_ptr
         if pointer is None:
-            self._fall_back(self._feedback_subscription_reason)
+            self._reader.fall_back(self._feedback_subscription_reason)
             return
-        plan = GoalFilterPlan(mode)
-        expression = plan.initial()
-        try:
-            _rcl.set_content_filter(pointer, expression)
-            if not _rcl.is_cft_enabled(pointer):
-                raise _rcl.ContentFilterError('the rmw accepted the filter but does not apply it')
-        except _rcl.ContentFilterError as e:
-            self._fall_back(f'installing the filter failed: {e}')
-            return
-        self._plan, self._feedback_ptr = plan, pointer
-        self._state = self._state._replace(active=True, reason='', expression=expression)
-
-    def _fall_back(self, reason: str, *, log: bool = True) -> None:
-        self._state = self._state._replace(active=False, reason=reason, expression='')
-        if log:
-            self._cft_logger.warning(
-                f'feedback filter not used, all feedback is received as with rclpy: {reason}')
+        plan = GoalFilterPlan(self._mode)
+        if self._reader.install(self._cft_client_handle, pointer,
+                                f'{self._resolved_action_name}/_action/feedback',
+                                ContentFilterOptions(plan.initial(), [])):
+            self._plan = plan
 
     def _update(self, make_expression: Callable[[], Optional[str]]) -> None:
         """Change the filter in place; on failure, fall back to receiving all feedback."""
         try:
             expression = make_expression()
-            if expression is None:
-                return
-            with self._cft_client_handle:
-                _rcl.set_content_filter(self._feedback_ptr, expression)
-        except (_rcl.ContentFilterError, ExpressionTooLong) as e:
+        except ExpressionTooLong as e:
             self._abandon_filter(f'a filter update failed: {e}')
             return
-        self._state = self._state._replace(expression=expression,
-                                           updates=self._state.updates + 1)
+        if expression is not None:
+            self._reader.update(ContentFilterOptions(expression, []))
+            if self._reader.filter is None:
+                self._plan = None
 
     def _abandon_filter(self, reason: str) -> None:
-        # Setting "" would recreate the DataReader under a possibly waiting executor; an
-        # always-true expression is an in-place change that lets all feedback through again.
         self._plan = None
-        try:
-            with self._cft_client_handle:
-                _rcl.set_content_filter(self._feedback_ptr, MATCH_ALL)
-        except _rcl.ContentFilterError as e:
-            reason += f'; and letting all feedback through failed too, feedback may be lost: {e}'
-        self._fall_back(reason)
+        self._reader.abandon(reason)
 
     # --- public API -------------------------------------------------------------------------------
 
     @property
     def feedback_filter_state(self) -> FeedbackFilterState:
         """The feedback filter's mode, whether it is active and why not, and its counters."""
-        with self._filter_lock:
-            return self._state._replace(
+        with self._reader.lock:
+            common = self._reader.state
+            return FeedbackFilterState(
+                self._mode, common.active, common.reason, common.expression, common.updates,
                 live_goals=self._plan.live_goals if self._plan else 0,
                 feedback_taken=self._feedback_taken, feedback_dropped=self._feedback_dropped,
                 confirmed=self._plan is None or self._needed_revision() <= self._confirmed_revision,
@@ -349,7 +330,7 @@ class ActionClient(CompatActionClient):
         :return: In ``client`` mode a UUID that starts with this client's tag; in ``goals`` mode
             one already announced to the server; otherwise a random UUID.
         """
-        with self._filter_lock:
+        with self._reader.lock:
             raw = self._plan.uuid_for_feedback() if self._plan else random_uuid4()
         return UUID(uuid=list(raw))
 
@@ -384,7 +365,7 @@ class ActionClient(CompatActionClient):
         """
         if not isinstance(goal, self._cft_action_type.Goal):
             raise TypeError()
-        with self._filter_lock:
+        with self._reader.lock:
             if goal_uuid is not None and feedback_callback is not None:
                 self._forget_finished(bytes(goal_uuid.uuid))
             if self._plan is not None:
@@ -407,8 +388,9 @@ class ActionClient(CompatActionClient):
         """Destroy the underlying action client handle."""
         self._cft_node.destroy_timer(self._release_timer)
         self._cft_node.destroy_timer(self._arrival_timer)
-        with self._filter_lock:
+        with self._reader.lock:
             self._end_probe()
+            self._reader.detach('the action client was destroyed')
         super().destroy()
 
     # --- proof of arrival of filter updates -------------------------------------------------------
@@ -458,7 +440,7 @@ class ActionClient(CompatActionClient):
             self._arrival_probe = None
 
     def _poll_arrival(self) -> None:
-        with self._filter_lock:
+        with self._reader.lock:
             probe = self._arrival_probe
             if probe is None:
                 self._arrival_timer.cancel()
@@ -574,7 +556,7 @@ class ActionClient(CompatActionClient):
         if goal_id is None:
             return
         goal_uuid = bytes(goal_id.uuid)
-        with self._filter_lock:
+        with self._reader.lock:
             if goal_uuid in self._cft_feedback_callbacks:
                 # The first result answers the goal; a later request is answered later still.
                 self._result_stamps.setdefault(goal_uuid, stamp)
@@ -585,7 +567,7 @@ class ActionClient(CompatActionClient):
         Both timestamps come from the server's clock: it wrote the result response only after its
         execute callback had returned, so feedback published in there is stamped earlier.
         """
-        with self._filter_lock:
+        with self._reader.lock:
             result_stamp = self._result_stamps.get(goal_uuid)
         if result_stamp is None:
             return False
@@ -615,7 +597,7 @@ class ActionClient(CompatActionClient):
 
     def _note_finished(self, goal_uuids: list[bytes]) -> None:
         now = time.monotonic()
-        with self._filter_lock:
+        with self._reader.lock:
             new = [u for u in goal_uuids
                    if u in self._cft_feedback_callbacks and u not in self._finished]
             for goal_uuid in new:
@@ -628,7 +610,7 @@ class ActionClient(CompatActionClient):
     def _release_finished_goals(self) -> None:
         """Drop callbacks and filter terms of goals that finished a grace period ago."""
         now = time.monotonic()
-        with self._filter_lock:
+        with self._reader.lock:
             for goal_uuid, finished_at in list(self._finished.items()):
                 if (now - finished_at >= FINISHED_GOAL_GRACE
                         and finished_at < self._feedback_drained_at):

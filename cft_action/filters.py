@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Iterable, Union
+from typing import Iterable, NamedTuple, Union
 
 from cft_action.errors import InvalidArgumentError
 
@@ -31,6 +31,16 @@ _NUMBER = re.compile(r'[+-]?(0[xX][0-9a-fA-F]+|\d+(\.\d+)?([eE][+-]?\d+)?)')
 _BOOLEANS = ('TRUE', 'FALSE')
 
 Literal = Union[str, bool, int, float]
+
+
+class ContentFilterOptions(NamedTuple):
+    """A filter expression and its parameters, named as in Kilted's rclpy.
+
+    It unpacks as ``(expression, parameters)``.
+    """
+
+    filter_expression: str
+    expression_parameters: list[str]
 
 
 def dds_literal(value: Literal) -> str:

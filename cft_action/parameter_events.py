@@ -73,17 +73,15 @@ from rclpy.qos import qos_profile_parameter_events, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.subscription import Subscription
 
-from cft_action._rcl import ContentFilterError
+from cft_action._filtered_reader import FilteredReader
 from cft_action._rclpy_compat import set_parameter_event_callbacks
 from cft_action.arrival import node_participant, participant_of, ServiceProbe
+from cft_action.errors import ContentFilterError
 from cft_action.filters import dds_literal, dds_literals, Literal, never_match_on
 from cft_action.subscription import (
     ContentFilterOptions,
     create_filtered_subscription,
-    get_content_filter,
     is_content_filter_supported,
-    is_filtered,
-    set_content_filter,
 )
 
 __all__ = [
@@ -257,24 +255,24 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         self._rclpy_callbacks = set_parameter_event_callbacks(self)  # what its methods use
 
         self._cft_logger = node.get_logger().get_child('cft_action')
-        # Guards the filter bookkeeping and the rmw calls. It is never taken while the Callbacks
-        # mutex is held, and the event path takes only _received_lock, so a callback that reads
-        # the state cannot deadlock against an add or remove in another thread.
-        self._filter_lock = threading.RLock()
+        # The reader's lock guards the filter bookkeeping and the rmw calls. It is never taken
+        # while the Callbacks mutex is held, and the event path takes only _received_lock, so a
+        # callback that reads the state cannot deadlock against an add or remove in another thread.
+        self._reader = FilteredReader(
+            self._cft_logger, match_all=ALL_NODES,
+            unfiltered='parameter event filter not used, all parameter events are received as '
+                       'with rclpy')
         self._received_lock = threading.Lock()
         self._received = 0
         self._watched: Counter[str] = Counter()  # node name -> parameter callbacks watching it
         self._event_callback_count = 0
         self._user_filter: Optional[ContentFilterOptions] = None
-        self._installed: Optional[ContentFilterOptions] = None  # None: no filter we may change
-        self._updates = 0
-        self._confirmed_updates = 0  # the value of _updates that wait_for_filter last proved
-        self._destroyed = False
+        self._confirmed_updates = 0  # the reader's updates when wait_for_filter last proved them
         self._state = ParameterEventFilterState('nodes', False, '', '', (), 0, (), 0, True)
 
         self.parameter_event_subscription = self._subscribe(
             callback_group, event_callbacks, qos_overriding_options, raw)
-        with self._filter_lock:
+        with self._reader.lock:
             self._publish_state()
 
     # --- subscription and filter ----------------------------------------------------------------
@@ -284,8 +282,9 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
                    qos_overriding_options: Optional[QoSOverridingOptions],
                    raw: bool) -> Subscription:
         if not is_content_filter_supported(self.node):
-            self._fall_back(f'the rmw implementation {rclpy.get_rmw_implementation_identifier()} '
-                            'has no content filter')
+            self._reader.fall_back(
+                f'the rmw implementation {rclpy.get_rmw_implementation_identifier()} has no '
+                'content filter')
         else:
             try:
                 subscription = create_filtered_subscription(
@@ -294,9 +293,11 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
                     event_callbacks=event_callbacks,
                     qos_overriding_options=qos_overriding_options, raw=raw)
             except ContentFilterError as e:
-                self._fall_back(f'installing the filter failed: {e}')
+                self._reader.fall_back(f'installing the filter failed: {e}')
             else:
-                self._installed = ContentFilterOptions(NO_NODES, [])
+                with subscription.handle:
+                    self._reader.adopt(subscription.handle, subscription.handle.pointer,
+                                       PARAMETER_EVENTS_TOPIC, ContentFilterOptions(NO_NODES, []))
                 return subscription
         return self.node.create_subscription(
             ParameterEvent, PARAMETER_EVENTS_TOPIC, self._on_event, self.qos_profile,
@@ -318,57 +319,35 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
 
     def _refresh(self) -> None:
         """Bring the middleware's filter in line with the callbacks, if it differs from them."""
-        with self._filter_lock:
-            if self._installed is not None:
+        with self._reader.lock:
+            if self._reader.filter is not None:
                 _, _, wanted = self._wanted()
-                if wanted != self._installed:
-                    try:
-                        self._install(wanted)
-                    except ContentFilterError as e:
-                        self._abandon_filter(f'a filter update failed: {e}')
+                try:
+                    self._change(wanted)
+                except ContentFilterError as e:
+                    self._reader.abandon(f'a filter update failed: {e}')
             self._publish_state()
 
-    def _install(self, options: ContentFilterOptions) -> None:
+    def _change(self, options: ContentFilterOptions) -> None:
         # In place, from one non-empty expression to another: safe under a spinning executor.
-        set_content_filter(self.parameter_event_subscription, *options)
-        self._installed = options
-        self._updates += 1
-        self._cft_logger.debug(
-            f'parameter event filter: {options.filter_expression!r} '
-            f'{options.expression_parameters} (update {self._updates})')
+        if self._reader.change(options):
+            self._cft_logger.debug(
+                f'parameter event filter: {options.filter_expression!r} '
+                f'{options.expression_parameters} (update {self._reader.updates})')
 
     def _publish_state(self) -> None:
-        if self._installed is None:
-            mode, reason = 'off', self._state.reason
+        common = self._reader.state
+        if self._reader.filter is None:
+            mode, reason = 'off', common.reason
         else:
             mode, reason, _ = self._wanted()
-        shown = self._installed if mode != 'all' else None
+        shown = mode not in ('all', 'off')
         self._state = ParameterEventFilterState(
-            mode=mode, active=shown is not None, reason=reason,
-            expression=shown.filter_expression if shown is not None else '',
-            expression_parameters=tuple(shown.expression_parameters) if shown is not None else (),
-            updates=self._updates, watched_nodes=tuple(sorted(self._watched)), events_received=0,
-            confirmed=self._confirmed_updates == self._updates)
-
-    def _fall_back(self, reason: str, *, log: bool = True) -> None:
-        self._installed = None
-        self._state = self._state._replace(mode='off', active=False, reason=reason,
-                                           updates=self._updates,
-                                           confirmed=self._confirmed_updates == self._updates)
-        if log:
-            self._cft_logger.warning(
-                'parameter event filter not used, all parameter events are received as with '
-                f'rclpy: {reason}')
-
-    def _abandon_filter(self, reason: str) -> None:
-        # Setting "" would recreate the DataReader under a possibly waiting executor; the
-        # always-true expression is an in-place change that lets every event through again.
-        try:
-            set_content_filter(self.parameter_event_subscription, ALL_NODES)
-            self._updates += 1
-        except ContentFilterError as e:
-            reason += f'; and letting all events through failed too, events may be lost: {e}'
-        self._fall_back(reason)
+            mode=mode, active=shown, reason=reason,
+            expression=common.expression if shown else '',
+            expression_parameters=common.expression_parameters if shown else (),
+            updates=common.updates, watched_nodes=tuple(sorted(self._watched)), events_received=0,
+            confirmed=self._confirmed_updates == common.updates)
 
     # --- the rclpy API ----------------------------------------------------------------------------
 
@@ -396,7 +375,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             so that the event_callback can be later removed.
         """
         handle = super().add_parameter_callback(parameter_name, node_name, callback)
-        with self._filter_lock:
+        with self._reader.lock:
             if not _is_quotable(handle.node_name):
                 # A quote cannot be in a DDS literal, nor in a ROS node name: no event can ever
                 # come from this node, so leaving it out of the filter loses nothing.
@@ -420,7 +399,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         :param handle: ParameterCallbackHandle of a callback to be removed
         """
         super().remove_parameter_callback(handle)  # raises, as rclpy, for an unknown handle
-        with self._filter_lock:
+        with self._reader.lock:
             self._watched[handle.node_name] -= 1
             if self._watched[handle.node_name] <= 0:
                 del self._watched[handle.node_name]
@@ -448,9 +427,9 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             so that the event_callback can be later removed.
         """
         handle = super().add_parameter_event_callback(callback)
-        with self._filter_lock:
+        with self._reader.lock:
             self._event_callback_count += 1
-            if self._event_callback_count == 1 and self._installed is not None \
+            if self._event_callback_count == 1 and self._reader.filter is not None \
                     and self._user_filter is None:
                 self._cft_logger.info(
                     'parameter event callback added: the parameter event handler now receives '
@@ -471,18 +450,15 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         :param handle: ParameterEventCallbackHandle of a callback to be removed
         """
         super().remove_parameter_event_callback(handle)
-        with self._filter_lock:
+        with self._reader.lock:
             self._event_callback_count -= 1
             self._refresh()
 
     def destroy(self) -> None:
         """Destroy the subscription to ``/parameter_events``."""
-        with self._filter_lock:
-            self._installed = None  # no filter changes on a destroyed subscription
-            self._destroyed = True
-            self._state = self._state._replace(mode='off', active=False,
-                                               reason='the handler was destroyed',
-                                               expression='', expression_parameters=())
+        with self._reader.lock:
+            self._reader.detach('the handler was destroyed')  # no filter changes from now on
+            self._publish_state()
         super().destroy()
 
     # --- filter API -------------------------------------------------------------------------------
@@ -512,11 +488,11 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             :attr:`parameter_event_filter_state`), or if the expression or a parameter is
             rejected. The message names the expression; the previous filter stays in force.
         """
-        with self._filter_lock:
-            if self._installed is None:
+        with self._reader.lock:
+            if self._reader.filter is None:
                 raise ContentFilterError(
                     f'cannot set parameter event filter {filter_expression!r}: the handler has no '
-                    f'content filter: {self._state.reason}')
+                    f'content filter: {self._reader.reason}')
             if not filter_expression:
                 self._user_filter = None
                 self._refresh()
@@ -528,16 +504,15 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
                 raise ContentFilterError(
                     f'parameter event filter {filter_expression!r}: bad expression parameter: '
                     f'{e}') from e
-            if options != self._installed:
-                previous = self._installed
-                try:
-                    self._install(options)
-                except ContentFilterError as e:
-                    # An in-place change that rmw_fastrtps rejects leaves the reader as it was.
-                    raise ContentFilterError(
-                        f'parameter event filter {filter_expression!r} was rejected, the filter '
-                        f'stays {previous.filter_expression!r}: {e}', function=e.function,
-                        ret=e.ret, rcl_error=e.rcl_error) from e
+            previous = self._reader.filter
+            try:
+                self._change(options)
+            except ContentFilterError as e:
+                # An in-place change that rmw_fastrtps rejects leaves the reader as it was.
+                raise ContentFilterError(
+                    f'parameter event filter {filter_expression!r} was rejected, the filter '
+                    f'stays {previous.filter_expression!r}: {e}', function=e.function,
+                    ret=e.ret, rcl_error=e.rcl_error) from e
             self._user_filter = options
             self._publish_state()
 
@@ -572,11 +547,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         :return: ``(filter_expression, expression_parameters)``; ``('', [])`` when the
             subscription has no content filter.
         """
-        with self._filter_lock:
-            subscription = self.parameter_event_subscription
-            if self._destroyed or not is_filtered(subscription):
-                return ContentFilterOptions('', [])
-            return get_content_filter(subscription)
+        return self._reader.read()
 
     def wait_for_filter(self, timeout_sec: Optional[float] = None) -> bool:
         """
@@ -605,10 +576,10 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         deadline = None
         if timeout_sec is not None and timeout_sec >= 0:
             deadline = time.monotonic() + timeout_sec
-        with self._filter_lock:
-            if self._destroyed:
+        with self._reader.lock:
+            if self._reader.ended:
                 return False
-            target = self._updates
+            target = self._reader.updates
             if self._confirmed_updates == target:
                 return True
         probes: dict[str, tuple[bytes, ServiceProbe]] = {}  # service -> (participant, probe)
@@ -634,8 +605,8 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         finally:
             for _, probe in probes.values():
                 probe.destroy()
-        with self._filter_lock:
-            if self._destroyed or self._updates != target:
+        with self._reader.lock:
+            if self._reader.ended or self._reader.updates != target:
                 return False
             self._confirmed_updates = target
             self._publish_state()

@@ -44,8 +44,8 @@ from typing import Any, Callable, Iterable, Optional, Sequence, Union
 from cft_action.errors import CftActionError
 
 __all__ = [
-    'Filter', 'FilterError', 'FieldPath', 'Kind', 'Schema', 'compile_filter', 'like_to_regex',
-    'parse', 'parse_literal',
+    'Filter', 'FilterError', 'FieldPath', 'Kind', 'Schema', 'check_filter', 'compile_filter',
+    'like_to_regex', 'parse', 'parse_literal',
 ]
 
 #: A field as a path of ``(member name, index or None)`` steps: ``a.b[2]`` is
@@ -868,6 +868,30 @@ def compile_filter(expression: str, parameters: Iterable[str] = (),
     result = Filter(expression, parameters, tree, schema, fields, kinds, root)
     result.warnings = warnings
     return result
+
+
+# The shape of the action client's goal filters (cft_action.filters.any_of of uuid_prefix_term):
+# equalities of a field with a small decimal integer, ANDed, and conjunctions in parentheses ORed.
+# It has no string, parameter, pattern or literal out of range, and its grammar is that of
+# _TOKEN and parse: every expression of this shape compiles (tests/test_sql.py checks both ways).
+_KEYWORD = r'(?:AND|and|OR|or|NOT|not|BETWEEN|between|LIKE|like|MATCH|match|TRUE|true|FALSE|false)'
+_EQUALITY = (rf'(?!{_KEYWORD}\b)[A-Za-z_]\w*(?:\[\d{{1,9}}\])?'
+             rf'(?:\.(?!{_KEYWORD}\b)[A-Za-z_]\w*(?:\[\d{{1,9}}\])?)* = (?:0|[1-9]\d{{0,17}})')
+_CONJUNCTION = rf'{_EQUALITY}(?: AND {_EQUALITY})*'
+_GOAL_FILTER_SHAPE = re.compile(
+    rf'{_CONJUNCTION}|\({_CONJUNCTION}\)(?: OR \({_CONJUNCTION}\))+', re.ASCII)
+
+
+def check_filter(expression: str, parameters: Iterable[str] = ()) -> None:
+    """Raise :class:`FilterError` for an expression that Fast DDS 2.14 would reject or abort on.
+
+    As :func:`compile_filter` without its result, and in linear time with a regular expression
+    for the shape of the action client's goal filters, which it may check on every update: for a
+    60 kB one that is a few milliseconds instead of a tenth of a second.
+    """
+    if _GOAL_FILTER_SHAPE.fullmatch(expression):
+        return
+    compile_filter(expression, parameters)
 
 
 def _comparable(kind: Kind) -> Kind:

@@ -2,7 +2,8 @@
 """Content-filtered subscriptions for any topic: the Jazzy backport of Kilted's rclpy API.
 
 Kilted's rclpy has ``ContentFilterOptions`` and ``Subscription.set_content_filter``; Jazzy's has
-neither. These functions give the same capability on Jazzy through :mod:`cft_action._rcl`.
+neither. These functions give the same capability on Jazzy, through the package's one
+filter-changing module, :mod:`cft_action._filtered_reader`.
 
 rmw_fastrtps destroys and recreates the DataReader on the first non-empty filter, and again when the
 filter is set back to ``""``. A recreation while an executor waits on the subscription is a
@@ -12,9 +13,8 @@ executor, later changes are only in place, and ``""`` is refused.
 
 from __future__ import annotations
 
-import threading
 import uuid
-from typing import Callable, NamedTuple, Optional, Sequence, Union
+from typing import Callable, Optional, Sequence, Union
 
 import rclpy
 from rclpy.callback_groups import CallbackGroup
@@ -26,13 +26,13 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.subscription import Subscription
 from rclpy.type_support import check_is_valid_msg_type
 
-from cft_action import _rcl, sql
+from cft_action._filtered_reader import get_filter, has_filter, set_filter
 from cft_action.message_types import first_primitive_field
 from cft_action._rclpy_compat import (declare_qos_parameters, new_rcl_subscription,
                                       register_subscription, validate_qos_or_depth,
                                       validate_topic_name)
 from cft_action.errors import ContentFilterError, InvalidArgumentError
-from cft_action.filters import dds_literals, Literal, never_match_on
+from cft_action.filters import ContentFilterOptions, Literal, never_match_on
 
 __all__ = [
     'ContentFilterError', 'ContentFilterOptions', 'create_filtered_subscription',
@@ -44,19 +44,7 @@ CFT_RMW_IMPLEMENTATIONS = frozenset({
     'rmw_fastrtps_cpp', 'rmw_fastrtps_dynamic_cpp', 'rmw_connextdds',
 })
 
-# rcl documents the content-filter calls as not thread-safe.
-_rcl_lock = threading.Lock()
 _message_lost_warned = False
-
-
-class ContentFilterOptions(NamedTuple):
-    """A filter expression and its parameters, named as in Kilted's rclpy.
-
-    It unpacks as ``(expression, parameters)``.
-    """
-
-    filter_expression: str
-    expression_parameters: list[str]
 
 
 def is_content_filter_supported(node: Node) -> bool:
@@ -68,32 +56,6 @@ def is_content_filter_supported(node: Node) -> bool:
     """
     del node  # the rmw is process-wide on Jazzy; the node is taken for a per-node future
     return rclpy.get_rmw_implementation_identifier() in CFT_RMW_IMPLEMENTATIONS
-
-
-def _apply(subscription_ptr: int, topic: str, expression: str,
-           expression_parameters: Sequence[Literal]) -> None:
-    """Set a filter and verify that the rmw applies it; raise naming the expression if not."""
-    try:
-        parameters = dds_literals(expression_parameters)
-    except (TypeError, ValueError) as e:
-        raise ContentFilterError(
-            f'content filter {expression!r} on {topic}: bad expression parameter: {e}') from e
-    described = f'content filter {expression!r} with parameters {parameters} on {topic}'
-    try:
-        # Fast DDS terminates the process on a LIKE or MATCH pattern its regex engine rejects,
-        # so what reaches it must first pass the checks of cft_action.sql.
-        sql.compile_filter(expression, parameters)
-    except sql.FilterError as e:
-        raise ContentFilterError(f'{described} was rejected: {e.reason}') from e
-    with _rcl_lock:
-        try:
-            _rcl.set_content_filter(subscription_ptr, expression, parameters)
-        except ContentFilterError as e:
-            raise ContentFilterError(f'{described} was rejected: {e.rcl_error}',
-                                     function=e.function, ret=e.ret, rcl_error=e.rcl_error) from e
-        if not _rcl.is_cft_enabled(subscription_ptr):
-            raise ContentFilterError(f'{described} was accepted but is not applied by '
-                                     f'{rclpy.get_rmw_implementation_identifier()}')
 
 
 def _validate_on_probe(node: Node, msg_type, qos_profile: QoSProfile, topic: str,
@@ -113,8 +75,8 @@ def _validate_on_probe(node: Node, msg_type, qos_profile: QoSProfile, topic: str
     probe = new_rcl_subscription(node, msg_type, probe_topic, qos_profile)
     try:
         with probe:
-            _apply(probe.pointer, probe_topic, never_match_on(field), ())
-            _apply(probe.pointer, topic, expression, expression_parameters)
+            set_filter(probe.pointer, probe_topic, never_match_on(field))
+            set_filter(probe.pointer, topic, expression, expression_parameters)
     finally:
         probe.destroy_when_not_in_use()
 
@@ -196,8 +158,8 @@ def create_filtered_subscription(
     subscription_object = new_rcl_subscription(node, msg_type, topic, qos_profile)
     try:
         with subscription_object:
-            _apply(subscription_object.pointer, final_topic, filter_expression,
-                   expression_parameters)
+            set_filter(subscription_object.pointer, final_topic, filter_expression,
+                       expression_parameters)
         subscription = Subscription(
             subscription_object, msg_type, topic, callback, callback_group, qos_profile, raw,
             event_callbacks=event_callbacks or SubscriptionEventCallbacks())
@@ -246,11 +208,11 @@ def set_content_filter(subscription: Subscription, filter_expression: str,
             'unfiltered subscription')
     with subscription.handle:
         pointer = subscription.handle.pointer
-        if not _rcl.is_cft_enabled(pointer):
+        if not has_filter(pointer):
             raise ContentFilterError(
                 f'{subscription.topic_name} has no content filter yet; installing a first one '
                 'recreates the DataReader, so create it with create_filtered_subscription')
-        _apply(pointer, subscription.topic_name, filter_expression, expression_parameters)
+        set_filter(pointer, subscription.topic_name, filter_expression, expression_parameters)
 
 
 def get_content_filter(subscription: Subscription) -> ContentFilterOptions:
@@ -259,12 +221,10 @@ def get_content_filter(subscription: Subscription) -> ContentFilterOptions:
     :raises ContentFilterError: if the rmw has no content filtering, or rcl fails.
     """
     with subscription.handle:
-        with _rcl_lock:
-            expression, parameters = _rcl.get_content_filter(subscription.handle.pointer)
-    return ContentFilterOptions(expression, parameters)
+        return get_filter(subscription.handle.pointer)
 
 
 def is_filtered(subscription: Subscription) -> bool:
     """Return whether the middleware applies a content filter to ``subscription``."""
     with subscription.handle:
-        return _rcl.is_cft_enabled(subscription.handle.pointer)
+        return has_filter(subscription.handle.pointer)

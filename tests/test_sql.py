@@ -282,3 +282,48 @@ def test_without_a_schema_kinds_come_from_the_values():
     with pytest.raises(sql.FilterError, match="field 'data' not found"):
         compiled.matches(Msg(other=1))
     assert matches('data = 1', Msg(data=b'\x01'))  # a ROS octet
+
+
+# --- check_filter: the linear-time shape of goal filters ---------------------------------------
+
+def _goal_filters():
+    import random
+    from cft_action.goal_filter import GoalFilterPlan
+    rng = random.Random(7)
+    for mode in ('client', 'goals'):
+        plan = GoalFilterPlan(mode, new_uuid=lambda: rng.randbytes(16))
+        yield plan.initial()
+        for _ in range(20):
+            plan.watch(rng.randbytes(16))
+            yield plan.grow()
+
+
+def test_every_goal_filter_has_the_fast_shape_and_compiles():
+    for expression in _goal_filters():
+        assert sql._GOAL_FILTER_SHAPE.fullmatch(expression), expression
+        sql.compile_filter(expression)
+
+
+@pytest.mark.parametrize('expression', [
+    'a = 0', 'a_1[999999999].b = 123456789012345678', '(x = 1 AND y = 2) OR (z = 3)',
+    'ANDY = 1', 'orbit.NOTE = 2', '(a = 1) OR (b = 2) OR (c = 3 AND d = 4)',
+])
+def test_what_the_fast_shape_accepts_compiles(expression):
+    assert sql._GOAL_FILTER_SHAPE.fullmatch(expression)
+    sql.compile_filter(expression)
+
+
+@pytest.mark.parametrize('expression', [
+    'AND = 1', 'a.or = 1', 'a = 01', 'a = -1', "a = 'x'", 'a = %0', '(a = 1)', 'a = 1 OR b = 2',
+    '(a = 1) OR b = 2', 'a = 1 AND', 'a LIKE 1', 'a = 1234567890123456789012', 'a  = 1',
+])
+def test_anything_else_takes_the_full_check(expression):
+    assert not sql._GOAL_FILTER_SHAPE.fullmatch(expression)
+
+
+@pytest.mark.parametrize('expression', ['AND = 1', 'a = 1 AND', "a LIKE '[x'", '(a = 1'])
+def test_check_filter_rejects_as_compile_filter_does(expression):
+    with pytest.raises(sql.FilterError):
+        sql.compile_filter(expression)
+    with pytest.raises(sql.FilterError):
+        sql.check_filter(expression)

@@ -1,0 +1,263 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""The content filter of one rcl subscription: the one place where the package changes a filter.
+
+rmw_fastrtps destroys and recreates the DataReader when a subscription gets its first filter, and
+again when the filter is set back to ``""`` (docs/INTERNALS.md, section 4). A recreation while an
+executor waits on the subscription is a use-after-free, and one after samples were queued loses
+them. Every filtered reader of the package therefore follows one rule, kept here:
+
+- the first filter is set before any executor can see the subscription
+  (:meth:`FilteredReader.install`);
+- every later change is in place, from one non-empty expression to another
+  (:meth:`FilteredReader.change`), and ``""`` is refused;
+- a filter that cannot be kept is abandoned for an expression that every sample matches, again in
+  place (:meth:`FilteredReader.abandon`); the owner then behaves as unfiltered rclpy, for good, and
+  the reason is in its state.
+
+Every expression passes :mod:`cft_action.sql` before it reaches rcl: Fast DDS terminates the process
+on a ``LIKE`` or ``MATCH`` pattern that its regex engine rejects. Every call holds one process-wide
+lock, because rcl documents its content-filter functions as not thread-safe.
+
+The owners, :class:`cft_action.ActionClient`, :class:`cft_action.ParameterEventHandler` and
+:func:`cft_action.create_filtered_subscription`, only decide which expression they want now.
+"""
+
+from __future__ import annotations
+
+import threading
+from typing import Any, ContextManager, NamedTuple, Optional, Sequence
+
+import rclpy
+from rclpy.impl.rcutils_logger import RcutilsLogger
+
+from cft_action import _rcl, sql
+from cft_action.errors import ContentFilterError
+from cft_action.filters import ContentFilterOptions, dds_literals, Literal
+
+__all__ = ['FilteredReader', 'ReaderFilterState', 'get_filter', 'has_filter', 'set_filter']
+
+_rcl_lock = threading.Lock()
+
+
+def set_filter(subscription_ptr: int, topic: str, expression: str,
+               expression_parameters: Sequence[Literal] = ()) -> ContentFilterOptions:
+    """Set a filter on an rcl subscription and verify that the rmw applies it.
+
+    :return: the filter as set, its parameters quoted as DDS literals.
+    :raises ContentFilterError: naming the expression and the topic, with rcl's error string, if
+        the expression is empty, a parameter cannot be quoted, :mod:`cft_action.sql` rejects the
+        expression, rcl fails, or the rmw does not apply it.
+    """
+    if not expression:
+        raise ContentFilterError(
+            f'refusing to set an empty filter expression on {topic}: rmw_fastrtps would destroy '
+            'and recreate the DataReader, which is a use-after-free under a waiting executor')
+    try:
+        parameters = dds_literals(expression_parameters)
+    except (TypeError, ValueError) as e:
+        raise ContentFilterError(
+            f'content filter {expression!r} on {topic}: bad expression parameter: {e}') from e
+    described = f'content filter {expression!r} with parameters {parameters} on {topic}'
+    try:
+        sql.check_filter(expression, parameters)
+    except sql.FilterError as e:
+        raise ContentFilterError(f'{described} was rejected: {e.reason}') from e
+    with _rcl_lock:
+        try:
+            _rcl.set_content_filter(subscription_ptr, expression, parameters)
+        except ContentFilterError as e:
+            raise ContentFilterError(f'{described} was rejected: {e.rcl_error}',
+                                     function=e.function, ret=e.ret, rcl_error=e.rcl_error) from e
+        if not _rcl.is_cft_enabled(subscription_ptr):
+            raise ContentFilterError(f'{described} was accepted but is not applied by '
+                                     f'{rclpy.get_rmw_implementation_identifier()}')
+    return ContentFilterOptions(expression, parameters)
+
+
+def get_filter(subscription_ptr: int) -> ContentFilterOptions:
+    """Return an rcl subscription's filter as the rmw reports it.
+
+    :raises ContentFilterError: if the rmw has no content filtering, or rcl fails.
+    """
+    with _rcl_lock:
+        expression, parameters = _rcl.get_content_filter(subscription_ptr)
+    return ContentFilterOptions(expression, parameters)
+
+
+def has_filter(subscription_ptr: int) -> bool:
+    """Return whether the rmw applies a content filter to an rcl subscription."""
+    return _rcl.is_cft_enabled(subscription_ptr)
+
+
+class ReaderFilterState(NamedTuple):
+    """What every filtered reader reports, whatever its owner.
+
+    :ivar active: whether a filter narrows what the subscription receives.
+    :ivar reason: why not; empty while it does.
+    :ivar expression: the filter in force; empty when not active.
+    :ivar expression_parameters: its parameters, as DDS literals; empty when not active.
+    :ivar updates: filter changes after the first installation, abandonment included; each is an
+        event at every matched writer.
+    """
+
+    active: bool
+    reason: str
+    expression: str
+    expression_parameters: tuple[str, ...]
+    updates: int
+
+
+class FilteredReader:
+    """The content filter of one subscription, from its installation to its end.
+
+    It is *pending* until :meth:`install` or :meth:`adopt`, then *active*, with a filter that
+    changes only in place, and *unfiltered* for good after :meth:`fall_back`, :meth:`abandon` or
+    :meth:`detach`, with the reason. Its :attr:`lock` serializes every change; an owner holds it
+    too while it decides which expression it wants, so that the decision and the change are one
+    step.
+
+    :param logger: the owner's logger, for the one warning when the filter is not used.
+    :param unfiltered: what happens without the filter, for that warning, e.g.
+        ``'feedback filter not used, all feedback is received as with rclpy'``.
+    :param match_all: an expression that every sample of the topic matches.
+    """
+
+    def __init__(self, logger: RcutilsLogger, *, unfiltered: str, match_all: str) -> None:
+        self.lock = threading.RLock()
+        self._topic = ''
+        self._logger = logger
+        self._unfiltered = unfiltered
+        self._match_all = match_all
+        self._handle: Optional[ContextManager[Any]] = None
+        self._pointer = 0
+        self._filter: Optional[ContentFilterOptions] = None
+        self._updates = 0
+        self._reason = ''
+        self._ended = False
+
+    # --- the state machine ----------------------------------------------------------------------
+
+    def install(self, handle: ContextManager[Any], subscription_ptr: int, topic: str,
+                options: ContentFilterOptions) -> bool:
+        """Set the first filter, before any executor can see the subscription.
+
+        :param handle: what keeps ``subscription_ptr`` alive while it is held (an rclpy handle).
+        :param subscription_ptr: the ``rcl_subscription_t *``.
+        :param topic: the subscription's topic, for messages.
+        :return: True if the filter is active; False if it fell back, logged, with the reason.
+        """
+        with self.lock:
+            self._topic = topic
+            try:
+                with handle:
+                    self._filter = set_filter(subscription_ptr, self._topic, *options)
+            except ContentFilterError as e:
+                self.fall_back(f'installing the filter failed: {e}')
+                return False
+            self._handle, self._pointer = handle, subscription_ptr
+            return True
+
+    def adopt(self, handle: ContextManager[Any], subscription_ptr: int, topic: str,
+              options: ContentFilterOptions) -> None:
+        """Take over a subscription that was created with ``options`` as its first filter."""
+        with self.lock:
+            self._topic = topic
+            self._handle, self._pointer, self._filter = handle, subscription_ptr, options
+
+    def change(self, options: ContentFilterOptions) -> bool:
+        """Change the filter in place, if it differs; the filter stays as it was on failure.
+
+        :return: True if a change was made, False if ``options`` is the filter in force.
+        :raises ContentFilterError: if the reader is not active, or the change is rejected.
+        """
+        with self.lock:
+            if self._filter is None or self._handle is None or self._ended:
+                raise ContentFilterError(
+                    f'the filter of {self._topic} cannot change: {self._reason or "not installed"}')
+            if options == self._filter:
+                return False
+            with self._handle:
+                self._filter = set_filter(self._pointer, self._topic, *options)
+            self._updates += 1
+            return True
+
+    def update(self, options: ContentFilterOptions) -> None:
+        """Change the filter in place if it is active; abandon it if the change is rejected."""
+        with self.lock:
+            if self._filter is None:
+                return
+            try:
+                self.change(options)
+            except ContentFilterError as e:
+                self.abandon(f'a filter update failed: {e}')
+
+    def abandon(self, reason: str) -> None:
+        """Let every sample through again, in place, and stay unfiltered for good."""
+        with self.lock:
+            if self._filter is not None and self._handle is not None:
+                try:
+                    with self._handle:
+                        set_filter(self._pointer, self._topic, self._match_all)
+                    self._updates += 1
+                except ContentFilterError as e:
+                    reason += ('; and letting everything through failed too, samples may be '
+                               f'lost: {e}')
+            self.fall_back(reason)
+
+    def fall_back(self, reason: str, *, log: bool = True) -> None:
+        """Use no filter from now on, because of ``reason``; log it once unless ``log`` is False."""
+        with self.lock:
+            self._filter, self._reason = None, reason
+            if log:
+                self._logger.warning(f'{self._unfiltered}: {reason}')
+
+    def detach(self, reason: str) -> None:
+        """The subscription is being destroyed: no call reaches it from now on."""
+        with self.lock:
+            self._filter, self._handle, self._reason, self._ended = None, None, reason, True
+
+    # --- what it reports ------------------------------------------------------------------------
+
+    @property
+    def filter(self) -> Optional[ContentFilterOptions]:
+        """The filter in force, or None when the reader is not (or no longer) filtered."""
+        return self._filter
+
+    @property
+    def updates(self) -> int:
+        """Filter changes since the first installation."""
+        return self._updates
+
+    @property
+    def reason(self) -> str:
+        """Why the reader is not filtered; empty while it is, or before its installation."""
+        return self._reason
+
+    @property
+    def ended(self) -> bool:
+        """Whether :meth:`detach` was called."""
+        return self._ended
+
+    @property
+    def state(self) -> ReaderFilterState:
+        """A snapshot of the common fields."""
+        with self.lock:
+            shown = self._filter
+            return ReaderFilterState(
+                active=shown is not None, reason=self._reason,
+                expression=shown.filter_expression if shown is not None else '',
+                expression_parameters=tuple(shown.expression_parameters) if shown else (),
+                updates=self._updates)
+
+    def read(self) -> ContentFilterOptions:
+        """The filter as the middleware reports it; ``('', [])`` when it has none.
+
+        After :meth:`abandon` that is the expression that matches everything.
+        """
+        with self.lock:
+            if self._handle is None:
+                return ContentFilterOptions('', [])
+            with self._handle:
+                if not has_filter(self._pointer):
+                    return ContentFilterOptions('', [])
+                return get_filter(self._pointer)

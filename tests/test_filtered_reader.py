@@ -1,0 +1,89 @@
+"""The filtered-reader core: one state machine for every filtered subscription, on real rcl ones."""
+
+import pytest
+from test_msgs.action import Fibonacci
+from rclpy.qos import QoSProfile
+from std_msgs.msg import Int32
+
+from cft_action import ActionClient, ContentFilterError, ContentFilterOptions, filters
+from cft_action._filtered_reader import FilteredReader, ReaderFilterState
+from cft_action.goal_filter import MAX_EXPRESSION_BYTES
+from cft_action.subscription import create_filtered_subscription
+from harness.ros import unique_name
+
+NEVER = ContentFilterOptions('data = 1 AND data = 2', [])
+MATCH_ALL = 'data = data'
+
+
+@pytest.fixture
+def reader(ros):
+    topic = '/' + unique_name('cft_core')
+    subscription = create_filtered_subscription(ros.node, Int32, topic, lambda _: None,
+                                                QoSProfile(depth=10), *NEVER)
+    core = FilteredReader(ros.node.get_logger(), unfiltered='test filter not used',
+                          match_all=MATCH_ALL)
+    with subscription.handle:
+        core.adopt(subscription.handle, subscription.handle.pointer, topic, NEVER)
+    yield core
+    ros.node.destroy_subscription(subscription)
+
+
+def test_changes_are_in_place_and_counted(reader):
+    assert reader.change(ContentFilterOptions('data > %0', ['5']))
+    assert not reader.change(ContentFilterOptions('data > %0', ['5'])), 'same filter: no event'
+    assert reader.state == ReaderFilterState(True, '', 'data > %0', ('5',), 1)
+    assert reader.read() == ('data > %0', ['5'])
+
+
+@pytest.mark.parametrize('options, named', [
+    (ContentFilterOptions('', []), 'empty filter expression'),
+    (ContentFilterOptions('data >', []), "'data >'"),
+    (ContentFilterOptions("data LIKE '[x'", []), 'LIKE'),
+], ids=['empty', 'syntax', 'pattern'])
+def test_a_rejected_change_names_it_and_keeps_the_filter(reader, options, named):
+    with pytest.raises(ContentFilterError, match=named):
+        reader.change(options)
+    assert reader.state == ReaderFilterState(True, '', NEVER.filter_expression, (), 0)
+    assert reader.read() == NEVER
+
+
+def test_a_failed_update_abandons_the_filter_in_place_for_good(reader):
+    reader.update(ContentFilterOptions('data >', []))
+    state = reader.state
+    assert (state.active, state.expression, state.updates) == (False, '', 1)
+    assert state.reason.startswith("a filter update failed: content filter 'data >'")
+    assert reader.read() == (MATCH_ALL, []), 'everything passes, on the same reader'
+    reader.update(ContentFilterOptions('data > 1', []))
+    assert reader.state == state, 'an abandoned filter never comes back'
+    with pytest.raises(ContentFilterError, match='a filter update failed'):
+        reader.change(ContentFilterOptions('data > 1', []))
+
+
+def test_no_call_reaches_a_detached_reader(reader):
+    reader.detach('destroyed')
+    assert reader.ended and reader.read() == ('', [])
+    reader.update(ContentFilterOptions('data > 1', []))
+    with pytest.raises(ContentFilterError, match='destroyed'):
+        reader.change(ContentFilterOptions('data > 1', []))
+
+
+def test_a_client_whose_filter_outgrows_discovery_lets_all_feedback_through(ros):
+    # Caller-supplied UUIDs are matched on all 16 bytes: about 400 bytes a goal.
+    client = ActionClient(ros.node, Fibonacci, unique_name('cft_core_action'))
+    try:
+        goals = MAX_EXPRESSION_BYTES // 400 + 10
+        for _ in range(goals):
+            uuid = client.new_goal_uuid()
+            uuid.uuid[0] ^= 0xFF  # not the client's tag: a term of its own
+            client.send_goal_async(Fibonacci.Goal(), feedback_callback=lambda _: None,
+                                   goal_uuid=uuid)
+            if not client.feedback_filter_state.active:
+                break
+        state = client.feedback_filter_state
+        assert not state.active, state
+        assert 'a filter update failed' in state.reason, state
+        assert str(MAX_EXPRESSION_BYTES) in state.reason, state
+        assert state.expression == '' and state.live_goals == 0
+        assert client._reader.read() == (filters.MATCH_ALL, []), 'all feedback passes, in place'
+    finally:
+        client.destroy()
