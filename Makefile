@@ -9,6 +9,7 @@ STAMP := $(VENV)/.installed
 .PHONY: test lint demo bench clean
 
 $(STAMP): pyproject.toml setup.py cft_action/_guard.c cft_action/_guard_filter.c cft_action/_guard.h \
+		cft_action/_guard_writer_qos.c \
 		cft_action/_reader_lock.c
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[test,bench,lint]'

@@ -17,9 +17,11 @@ setup(
     ext_modules=[
         Extension(
             'cft_action._cftguard',
-            sources=['cft_action/_guard.c', 'cft_action/_guard_filter.c'],
+            sources=['cft_action/_guard.c', 'cft_action/_guard_filter.c',
+                     'cft_action/_guard_writer_qos.c'],
             libraries=['dl', 'pthread'],
-            # Export only the three interposed Fast DDS members and the cft_guard_* C API.
+            # Export only the interposed Fast DDS and rmw_fastrtps functions and the cft_guard_*
+            # C API.
             # -fexceptions: a C++ exception thrown by Fast DDS through a wrapper must still run
             # the wrapper's unlock (a cleanup attribute), or the writer's stripe stays locked.
             extra_compile_args=['-O2', '-fvisibility=hidden', '-fexceptions', '-Wall'],

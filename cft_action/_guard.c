@@ -329,6 +329,10 @@ static inline struct family *ready(int fam) {
   return f;
 }
 
+int cft_guard_knows_fastdds2(void) {
+  return __atomic_load_n(&ready(0)->state, __ATOMIC_ACQUIRE) == CFT_GUARD_ACTIVE;
+}
+
 static void missing(struct family *f, int fn) {
   static int told;
   if (!__atomic_exchange_n(&told, 1, __ATOMIC_RELAXED))

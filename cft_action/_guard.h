@@ -1,7 +1,8 @@
 // Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 //
-// What the two halves of the server guard share: _guard.c (the locks, and the interposition of
-// the three DataWriterImpl members) and _guard_filter.c (the uuid filter verdicts).
+// What the parts of the server guard share: _guard.c (the locks, and the interposition of the
+// three DataWriterImpl members), _guard_filter.c (the uuid filter verdicts) and
+// _guard_writer_qos.c (the writers' limit of filtered readers).
 #ifndef CFT_ACTION_GUARD_H_
 #define CFT_ACTION_GUARD_H_
 
@@ -13,6 +14,10 @@
 // One line on stderr, written at once so that lines of different threads do not interleave.
 __attribute__((format(printf, 1, 2))) void cft_say(const char *fmt, ...);
 int cft_debug_enabled(void);
+
+// 1 when _guard.c locks the Fast DDS 2.14 it knows, whose layouts the other parts may then use.
+// Decides the family's state if it is not decided yet: call it only once Fast DDS is loaded.
+int cft_guard_knows_fastdds2(void);
 
 // The writer whose perform_create_new_change this thread is inside, with that writer's stripe
 // held; NULL elsewhere. Only then may a filter verdict use the writer's reader table.

@@ -30,7 +30,11 @@ from cft_action._native import extension_path, GUARD_LIBRARY
 from cft_action.errors import CftActionError
 
 __all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts',
-           'filter_counts', 'environment']
+           'filter_counts', 'writer_limits', 'environment', 'READER_FILTERS_ENV']
+
+#: Environment variable with the number of filtered readers that each writer of a guarded process
+#: filters for (1 to 4063; default 1024; Fast DDS's own limit is 32).
+READER_FILTERS_ENV = 'CFT_ACTION_READER_FILTERS'
 
 #: Name of the extension module that setup.py builds from ``_guard.c``.
 _MODULE = GUARD_LIBRARY
@@ -71,6 +75,8 @@ def _preloaded() -> Optional[ctypes.CDLL]:
     process.cft_guard_call_count.restype = ctypes.c_ulong
     process.cft_guard_filter_count.argtypes = [ctypes.c_int]
     process.cft_guard_filter_count.restype = ctypes.c_ulong
+    process.cft_guard_writer_qos_count.argtypes = [ctypes.c_int]
+    process.cft_guard_writer_qos_count.restype = ctypes.c_ulong
     return process
 
 
@@ -142,6 +148,32 @@ def filter_counts() -> dict[str, int]:
     if process is None:
         return {}
     return {name: int(process.cft_guard_filter_count(i)) for i, name in enumerate(FILTER_COUNTERS)}
+
+
+#: The counters of cft_guard_writer_qos_count() in _guard_writer_qos.c, in its order.
+WRITER_QOS_COUNTERS = ('raised', 'left', 'reader_filters')
+
+
+def writer_limits() -> dict[str, int]:
+    """Return how many filtered readers the writers of this process filter for.
+
+    A Fast DDS 2.14 writer keeps the filters of at most 32 readers; a filtered reader beyond them
+    receives every sample and filters it itself. The guard raises that limit to
+    ``CFT_ACTION_READER_FILTERS`` (default 1024) in the QoS of every writer that rmw_fastrtps
+    creates, where it knows the Fast DDS (see :func:`status`). Keys:
+
+    - ``raised``: writers created with the raised limit;
+    - ``left``: writers left at 32, because the guard does not know this Fast DDS or its QoS did not
+      hold the expected default (the guard says why on stderr, once);
+    - ``reader_filters``: the limit that raised writers get (32: not raised).
+
+    An empty dict when the guard is not preloaded.
+    """
+    process = _preloaded()
+    if process is None:
+        return {}
+    return {name: int(process.cft_guard_writer_qos_count(i))
+            for i, name in enumerate(WRITER_QOS_COUNTERS)}
 
 
 def environment(env: Optional[Mapping[str, str]] = None) -> dict[str, str]:

@@ -33,8 +33,8 @@ watcher then has the counters from just before a crash). The JSON holds ``t`` (m
 goal responses sent, and sends that failed: rclpy logs those and drops the goal),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
-line), ``guard_calls`` and ``guard_filter`` (its call and filter-verdict counters) and ``writers`` (the GUIDs of the feedback and status
-writers, in hex). ``GOALS <json>`` replies to the command ``goals``: the feedback messages published
+line), ``guard_calls``, ``guard_filter`` and ``guard_writers`` (its call, filter-verdict and
+writer-limit counters) and ``writers`` (the GUIDs of the feedback and status writers, in hex). ``GOALS <json>`` replies to the command ``goals``: the feedback messages published
 per goal so far, by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). End
 of input stops the server.
 """
@@ -275,7 +275,7 @@ class TickingServer:
                     'late_ticks': self.late_ticks, 'intervals': self.intervals,
                     'interval_s': self.interval_s, 'cpu_s': usage.ru_utime + usage.ru_stime,
                     'guard': guard.status(), 'guard_calls': guard.call_counts(),
-                    'guard_filter': guard.filter_counts()}
+                    'guard_filter': guard.filter_counts(), 'guard_writers': guard.writer_limits()}
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:

@@ -6,7 +6,13 @@ A ROS session in the test process is :class:`harness.ros.RosSession`.
 from __future__ import annotations
 
 import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
 from typing import Optional, Sequence
+
+import pytest
 
 from harness.proc import Proc, python_module
 
@@ -44,3 +50,26 @@ def _started(proc: Proc, ready: str, timeout: float) -> Proc:
             proc.stop()
             raise
     return proc
+
+
+def fastdds_header_probe(source: str, tmp_path: Path) -> list[int]:
+    """Compile a C++ ``source`` against the installed Fast DDS headers, run it, and return the
+    integers it prints: the layouts that the guard assumes, as the headers define them.
+
+    Skips the test where there is no C++ compiler or the ROS wheels ship no headers.
+    """
+    compiler = shutil.which('c++') or shutil.which('g++')
+    include = Path(sys.prefix) / 'include'
+    if compiler is None or not (include / 'fastdds').is_dir():
+        pytest.skip('needs a C++ compiler and the Fast DDS headers of the ROS wheels')
+    source_file = tmp_path / 'probe.cpp'
+    source_file.write_text(source)
+    binary = tmp_path / 'probe'
+    # Linked to the wheels' Fast DDS for its static constants; the libraries it needs in turn
+    # are found at run time through this process's LD_LIBRARY_PATH (ros-wheels-bootstrapper's).
+    subprocess.run([compiler, '-std=c++17', '-Wno-invalid-offsetof', f'-I{include}',
+                    str(source_file), '-o', str(binary), f'-L{Path(sys.prefix) / "lib"}',
+                    '-lfastrtps', '-lfastcdr', '-Wl,--unresolved-symbols=ignore-in-shared-libs'],
+                   check=True, capture_output=True, timeout=120)
+    return [int(v) for v in subprocess.run([str(binary)], check=True, capture_output=True,
+                                           text=True, timeout=30).stdout.split()]

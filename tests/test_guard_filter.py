@@ -17,9 +17,6 @@ import ctypes
 import itertools
 import os
 import random
-import shutil
-import subprocess
-import sys
 from pathlib import Path
 from typing import Iterator
 
@@ -31,7 +28,7 @@ from cft_action import create_filtered_subscription, guard, set_content_filter, 
 from cft_action.filters import MATCH_ALL, NEVER_MATCH, any_of, uuid_prefix_term
 from cft_action.message_types import message_schema
 from harness.ros import unique_name
-from tests.support import helper_process
+from tests.support import fastdds_header_probe, helper_process
 
 FEEDBACK = Fibonacci.Impl.FeedbackMessage
 SCHEMA = message_schema(FEEDBACK)
@@ -150,21 +147,7 @@ def guard_library() -> ctypes.CDLL:
 
 
 def test_the_layout_is_that_of_the_installed_fast_dds_headers(tmp_path: Path) -> None:
-    compiler = shutil.which('c++') or shutil.which('g++')
-    include = Path(sys.prefix) / 'include'
-    if compiler is None or not (include / 'fastdds').is_dir():
-        pytest.skip('needs a C++ compiler and the Fast DDS headers of the ROS wheels')
-    source = tmp_path / 'probe.cpp'
-    source.write_text(LAYOUT_PROBE)
-    binary = tmp_path / 'probe'
-    # Linked to the wheels' Fast DDS for its static constants; the libraries it needs in turn
-    # are found at run time through this process's LD_LIBRARY_PATH (ros-wheels-bootstrapper's).
-    subprocess.run([compiler, '-std=c++17', '-Wno-invalid-offsetof', f'-I{include}', str(source),
-                    '-o', str(binary), f'-L{Path(sys.prefix) / "lib"}', '-lfastrtps', '-lfastcdr',
-                    '-Wl,--unresolved-symbols=ignore-in-shared-libs'],
-                   check=True, capture_output=True, timeout=120)
-    headers = [int(v) for v in subprocess.run([str(binary)], check=True, capture_output=True,
-                                              text=True, timeout=30).stdout.split()]
+    headers = fastdds_header_probe(LAYOUT_PROBE, tmp_path)
     library = guard_library()
     library.cft_guard_filter_layout.restype = ctypes.c_long
     ours = [library.cft_guard_filter_layout(i) for i in range(len(headers))]

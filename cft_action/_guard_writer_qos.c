@@ -1,0 +1,150 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The server guard's third part: how many readers a writer filters for.
+//
+// A Fast DDS 2.14 DataWriter keeps writer-side filters for at most
+// writer_resource_limits().reader_filters_allocation.maximum readers, 32 by default, and XML
+// cannot set it. A filtered reader beyond that is matched without its filter: it receives every
+// sample, each with the filter signatures of the 32, and filters it itself (ReaderFilterCollection::
+// process_reader_filter_info returns when the collection is full, and does not look again when a
+// reader leaves). Past 32 filtered clients per action, those clients receive more bytes than plain
+// ones (docs/BENCHMARKS.md, "The knee past 32 filtered readers").
+//
+// rmw_fastrtps_cpp fills every DataWriterQos with get_datawriter_qos() of
+// librmw_fastrtps_shared_cpp, through the PLT, just before Publisher::create_datawriter: the last
+// word on the QoS of every writer it makes. The definition below calls the real one, then raises
+// that maximum to CFT_ACTION_READER_FILTERS (default 1024) in the QoS it filled. It does so only
+// where the guard locks (the Fast DDS 2.14 it knows, loaded after the guard), and only where the
+// three size_t at the known offset read as Fast DDS's default {0, 32, 1}; otherwise it leaves the
+// QoS alone and says why, once.
+//
+// The maximum is only a bound: the filter collection and every change's list of filtered-out
+// readers grow as readers come. What grows with it is PID_CONTENT_FILTER_INFO, 16 bytes per
+// filtered reader in every DATA, whose 16-bit length caps it at 4063 readers.
+
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <errno.h>
+#include <limits.h>
+#include <stdbool.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <stdlib.h>
+
+#include "_guard.h"
+
+#define GET_DATAWRITER_QOS \
+  "_Z18get_datawriter_qosRK17rmw_qos_profile_sRK18rosidl_type_hash_sRN8eprosima7fastdds3dds13DataWriterQosE"
+#define RMW_SHARED_SONAME "librmw_fastrtps_shared_cpp.so"
+
+// DataWriterQos of Fast DDS 2.14.5: the offset of writer_resource_limits().reader_filters_allocation,
+// a ResourceLimitedContainerConfig {size_t initial, maximum, increment}. tests/test_guard.py checks
+// it against the installed headers, through cft_guard_writer_qos_layout.
+#define READER_FILTERS_OFFSET 1008
+static const size_t fastdds_default[3] = {0, 32, 1};
+
+#define DEFAULT_READER_FILTERS 1024
+#define MAX_READER_FILTERS 4063  // 12 + 4 * ceil(n / 32) + 16 * n must fit in 16 bits
+
+typedef bool (*get_datawriter_qos_fn)(const void *profile, const void *type_hash, void *qos);
+
+enum { RAISED = 0, LEFT = 1, COUNTERS = 2 };
+static unsigned long counters[COUNTERS];
+static get_datawriter_qos_fn real_get_datawriter_qos;
+static size_t wanted;  // 0 until read from the environment
+static char left_reason[256];
+
+static void say_left_once(void) {
+  static int told;
+  if (!__atomic_exchange_n(&told, 1, __ATOMIC_RELAXED))
+    cft_say("writers keep Fast DDS's limit of 32 filtered readers: %s", left_reason);
+}
+
+// CFT_ACTION_READER_FILTERS, or the default; an unusable value keeps Fast DDS's 32, and says so.
+static size_t reader_filters_wanted(void) {
+  size_t n = __atomic_load_n(&wanted, __ATOMIC_RELAXED);
+  if (n != 0) return n;
+  const char *text = getenv("CFT_ACTION_READER_FILTERS");
+  n = DEFAULT_READER_FILTERS;
+  if (text != NULL && text[0] != '\0') {
+    char *end;
+    errno = 0;
+    unsigned long v = strtoul(text, &end, 10);
+    if (errno != 0 || *end != '\0' || text[0] == '-' || v < 1 || v > MAX_READER_FILTERS) {
+      snprintf(left_reason, sizeof left_reason,
+               "CFT_ACTION_READER_FILTERS=%.40s is not a number from 1 to %d", text,
+               MAX_READER_FILTERS);
+      n = fastdds_default[1];
+      say_left_once();
+    } else {
+      n = v;
+    }
+  }
+  __atomic_store_n(&wanted, n, __ATOMIC_RELAXED);
+  return n;
+}
+
+static get_datawriter_qos_fn find_real(void) {
+  get_datawriter_qos_fn real = __atomic_load_n(&real_get_datawriter_qos, __ATOMIC_ACQUIRE);
+  if (real != NULL) return real;
+  // rmw loads its libraries with RTLD_LOCAL, outside the global scope: ask the library itself.
+  void *handle = dlopen(RMW_SHARED_SONAME, RTLD_LAZY | RTLD_NOLOAD);
+  void *p = handle != NULL ? dlsym(handle, GET_DATAWRITER_QOS) : NULL;
+  if (p == NULL) p = dlsym(RTLD_NEXT, GET_DATAWRITER_QOS);
+  real = (get_datawriter_qos_fn)p;
+  __atomic_store_n(&real_get_datawriter_qos, real, __ATOMIC_RELEASE);
+  return real;  // the handle is kept on purpose: the pointer must not outlive the library
+}
+
+static void raise_reader_filters(void *qos) {
+  size_t n = reader_filters_wanted();
+  if (n == fastdds_default[1]) return;
+  if (!cft_guard_knows_fastdds2()) {
+    snprintf(left_reason, sizeof left_reason,
+             "the guard does not lock this Fast DDS, so it does not know its DataWriterQos");
+    __atomic_fetch_add(&counters[LEFT], 1, __ATOMIC_RELAXED);
+    say_left_once();
+    return;
+  }
+  size_t *config = (size_t *)((char *)qos + READER_FILTERS_OFFSET);
+  if (config[0] != fastdds_default[0] || config[1] != fastdds_default[1] ||
+      config[2] != fastdds_default[2]) {
+    snprintf(left_reason, sizeof left_reason,
+             "the DataWriterQos does not hold {0, 32, 1} where Fast DDS 2.14.5 keeps "
+             "reader_filters_allocation (it holds {%zu, %zu, %zu})", config[0], config[1], config[2]);
+    __atomic_fetch_add(&counters[LEFT], 1, __ATOMIC_RELAXED);
+    say_left_once();
+    return;
+  }
+  config[1] = n;
+  __atomic_fetch_add(&counters[RAISED], 1, __ATOMIC_RELAXED);
+}
+
+CFT_EXPORT bool cft_get_datawriter_qos(const void *profile, const void *type_hash, void *qos)
+    __asm__(GET_DATAWRITER_QOS);
+bool cft_get_datawriter_qos(const void *profile, const void *type_hash, void *qos) {
+  get_datawriter_qos_fn real = find_real();
+  if (real == NULL) {
+    // Only rmw_fastrtps calls this, and it is linked against the real one: not reached in
+    // practice. Failing makes rmw fail the writer's creation with an error, not crash.
+    cft_say("no real definition of get_datawriter_qos; the writer is not created");
+    return false;
+  }
+  bool ok = real(profile, type_hash, qos);
+  if (ok) raise_reader_filters(qos);
+  return ok;
+}
+
+// ---- the C API, for ctypes -----------------------------------------------------------------------
+// 0: writers whose limit was raised; 1: writers left at Fast DDS's 32 (see the stderr line);
+// 2: the maximum that raised writers get.
+CFT_EXPORT unsigned long cft_guard_writer_qos_count(int which) {
+  if (which >= 0 && which < COUNTERS) return __atomic_load_n(&counters[which], __ATOMIC_RELAXED);
+  if (which == COUNTERS) return reader_filters_wanted();
+  return 0;
+}
+
+// The layout this file assumes, for the header probe: 0: READER_FILTERS_OFFSET; -1 past the end.
+CFT_EXPORT long cft_guard_writer_qos_layout(int which) {
+  return which == 0 ? READER_FILTERS_OFFSET : -1;
+}

@@ -1,0 +1,94 @@
+"""Past 32 filtered readers: the guard raises a writer's limit, so the server filters for each one.
+
+A Fast DDS 2.14 writer filters for at most 32 readers; the others receive every sample. The server's
+guard counts the filter evaluations, one per sample and filtered reader, so evaluations per
+published sample is how many readers the feedback writer filters for.
+"""
+
+import ctypes
+import os
+
+import pytest
+import rclpy.action
+from test_msgs.action import Fibonacci
+
+from cft_action import ActionClient, guard
+from harness.ros import unique_name
+from tests.support import action_server, fastdds_header_probe
+
+READERS = 40
+ORDER = 5
+
+
+def evaluations(stats: dict) -> int:
+    return stats['guard_filter']['uuid_verdicts'] + stats['guard_filter']['fastdds_verdicts']
+
+
+@pytest.mark.parametrize('limit, filtered_for', [(None, READERS), ('32', 32)],
+                         ids=['guard-default', 'fastdds-limit'])
+def test_a_guarded_writer_filters_for_every_client_past_32(ros, limit, filtered_for):
+    env = guard.environment()
+    if limit is not None:
+        env[guard.READER_FILTERS_ENV] = limit
+    action = '/' + unique_name('cft_limit')
+    server = action_server(action, 0.02, env=env)
+    clients = [ActionClient(ros.node, Fibonacci, action) for _ in range(READERS)]
+    # Created after the filtered readers: its answer proves that the server has processed their
+    # discovery, which comes from this participant in one ordered stream.
+    witness = rclpy.action.ActionClient(ros.node, Fibonacci, action)
+    try:
+        assert witness.wait_for_server(timeout_sec=30)
+        witness_goal = witness.send_goal_async(Fibonacci.Goal(order=0))
+        assert ros.spin_until(witness_goal.done, timeout=30)
+        before = server.request_json('stats', 'STATS')
+        received = []
+        goal = clients[0].send_goal_async(Fibonacci.Goal(order=ORDER),
+                                          feedback_callback=received.append)
+        assert ros.spin_until(lambda: len(received) >= ORDER, timeout=30), received
+        after = server.request_json('stats', 'STATS')
+        published = after['published'] - before['published']
+        assert published >= ORDER
+        assert evaluations(after) - evaluations(before) == filtered_for * published
+        writers = after['guard_writers']
+        assert writers['reader_filters'] == (1024 if limit is None else 32), writers
+        assert (writers['raised'] > 0) == (limit is None) and writers['left'] == 0, writers
+        assert goal.done() and all(c.feedback_filter_state.active for c in clients)
+    finally:
+        for client in (*clients, witness):
+            client.destroy()
+        server.stop()
+    assert os.environ.get(guard.READER_FILTERS_ENV) is None, 'the suite must not set it'
+
+
+WRITER_QOS_PROBE = r'''
+#include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
+#include <cstdio>
+using eprosima::fastdds::dds::DataWriterQos;
+int main() {
+  alignas(DataWriterQos) static char storage[sizeof(DataWriterQos)];
+  auto* qos = reinterpret_cast<DataWriterQos*>(storage);  // inline accessors only
+  const auto& config = qos->writer_resource_limits().reader_filters_allocation;
+  printf("%td\n", reinterpret_cast<const char*>(&config) - storage);
+  static_assert(sizeof(config) == 3 * sizeof(size_t), "initial, maximum, increment");
+  return 0;
+}
+'''
+
+
+def test_the_writer_qos_offset_is_that_of_the_installed_fast_dds_headers(tmp_path):
+    headers = fastdds_header_probe(WRITER_QOS_PROBE, tmp_path)
+    library = ctypes.CDLL(guard.library_path(), mode=os.RTLD_LOCAL)
+    library.cft_guard_writer_qos_layout.restype = ctypes.c_long
+    assert [library.cft_guard_writer_qos_layout(i) for i in range(len(headers))] == headers
+    assert library.cft_guard_writer_qos_layout(len(headers)) == -1
+
+
+def test_an_unusable_limit_keeps_fastdds_32_and_says_so(ros):
+    env = {**guard.environment(), guard.READER_FILTERS_ENV: '64k'}
+    server = action_server('/' + unique_name('cft_limit_bad'), 0.02, env=env)
+    try:
+        writers = server.request_json('stats', 'STATS')['guard_writers']
+        assert writers == {'raised': 0, 'left': 0, 'reader_filters': 32}
+    finally:
+        server.stop()
+    assert 'CFT_ACTION_READER_FILTERS=64k is not a number from 1 to 4063' in server.tail()
