@@ -41,7 +41,8 @@ from harness import load
 REPO = Path(__file__).resolve().parent.parent
 
 SIZES = {'small': 0, '10k': 2500}  # int32 elements of padding; 2500 makes a 10 kB message
-#: Fast DDS's writer keeps filters for at most this many readers (reader_filters_allocation).
+#: Fast DDS's writer keeps filters for at most this many readers (reader_filters_allocation), unless
+#: the server guard raises the limit (CFT_ACTION_READER_FILTERS, default 1024).
 WRITER_FILTER_LIMIT = 32
 
 
@@ -266,8 +267,9 @@ def plot(results: dict[str, Any], directory: Path) -> list[Path]:
         ax.axhline(1.0, color='#7f7f7f', lw=1)
         ax.text(0.99, 1.0, 'plain rclpy', fontsize=8, va='bottom', ha='right', color='#7f7f7f',
                 transform=ax.get_yaxis_transform())
-        ax.text(WRITER_FILTER_LIMIT, 0.02, ' writer filters\n for 32 readers', fontsize=8,
-                va='bottom', transform=ax.get_xaxis_transform())
+        ax.text(WRITER_FILTER_LIMIT, 0.02,
+                ' Fast DDS: writer filters\n for 32 readers unless\n the guard raises it',
+                fontsize=8, va='bottom', transform=ax.get_xaxis_transform())
         ax.set_xscale('log', base=2)
         ax.set_ylim(bottom=0)
         ax.set_xlabel('client processes N (log)')
