@@ -227,6 +227,13 @@ def markdown(results: dict[str, Any]) -> str:
                 f"{_fmt(cft['feedback_data_to_plain_neighbours'], '.3f')} | "
                 f"{_fmt(cft.get('feedback_data_bytes_per_filtered_reader'), '.1f')} | "
                 f"{plain['samples']} ({plain['lost']}) / {cft['samples']} ({cft['lost']}) |")
+        filtered = [r for r in rows if r['neighbour_config'] == 'client' and 'per_sample' in r]
+        if len(filtered) >= 2:
+            first, last = filtered[0], filtered[-1]
+            slope = ((last['per_sample']['feedback data'] - first['per_sample']['feedback data'])
+                     / (last['neighbours'] - first['neighbours']))
+            out.append(f"\nFeedback data per sample grows by {slope:.1f} B per filtered neighbour "
+                       f"from K = {first['neighbours']} to K = {last['neighbours']}.")
         again = [r for r in rows if r['neighbours'] == 0][1:]
         if again:
             out.append(f"\nThe bystander alone again after the filtered neighbours left: "
