@@ -298,6 +298,9 @@ def anatomy_table(phase: dict[str, Any]) -> str:
         total += entry['bytes']
         rows.append(f"| {category} | {entry['bytes'] / 1e3:.1f} | {entry['packets']} | "
                     f"{entry['bytes'] / own_payload:.2f} |" if own_payload else '')
+        if 'resent_bytes' in entry and own_payload:
+            rows.append(f"| … of which resent | {entry['resent_bytes'] / 1e3:.1f} | "
+                        f"{entry['resent_packets']} | {entry['resent_bytes'] / own_payload:.2f} |")
     rows.append(f"| **total** | {total / 1e3:.1f} | | {total / own_payload:.2f} |"
                 if own_payload else '')
     without = total - phase['anatomy']['status']['bytes']
