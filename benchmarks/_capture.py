@@ -16,6 +16,10 @@ and packets (whole Ethernet frames, as ``rx_bytes`` counts them) by category:
 
 IP fragments after the first are counted in the category of their first fragment.
 
+``feedback data`` also has ``resent_bytes`` and ``resent_packets``: the frames of datagrams whose
+feedback DATA carried only sequence numbers already received (repairs the writer sent again after
+a NACK or a lost fragment).
+
 ``sweep.py --anatomy`` runs it on the first client of every phase, in a run of its own: capturing
 costs CPU on the machine being measured.
 """
@@ -55,6 +59,24 @@ def _writer_ids(payload: bytes) -> list[tuple[int, bytes]]:
     return found
 
 
+def data_sequence_numbers(payload: bytes) -> list[tuple[bytes, int]]:
+    """(writer GUID, sequence number) of each DATA submessage of one RTPS datagram."""
+    if payload[:4] != b'RTPS':
+        return []
+    prefix, found, offset = payload[8:20], [], 20
+    while offset + 4 <= len(payload):
+        kind, flags = payload[offset], payload[offset + 1]
+        order = '<' if flags & 1 else '>'
+        length = struct.unpack(order + 'H', payload[offset + 2:offset + 4])[0]
+        if kind == _DATA and offset + 24 <= len(payload):
+            high, low = struct.unpack(order + 'iI', payload[offset + 16:offset + 24])
+            found.append((prefix + payload[offset + 12:offset + 16], (high << 32) | low))
+        if length == 0:
+            break
+        offset += 4 + length
+    return found
+
+
 def classify(payload: bytes, feedback: set[bytes], status: set[bytes]) -> str:
     """The category of one RTPS datagram (``payload`` from the UDP payload on)."""
     if payload[:4] != b'RTPS':
@@ -84,7 +106,9 @@ def capture(interface: str, feedback: set[bytes], status: set[bytes],
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 * 1024 * 1024)
     frames: Counter[str] = Counter()
     octets: Counter[str] = Counter()
-    first_fragment: dict[tuple[bytes, int], str] = {}
+    first_fragment: dict[tuple[bytes, int], tuple[str, bool]] = {}
+    received: set[tuple[bytes, int]] = set()  # (feedback writer GUID, sequence number)
+    resent = Counter[str]()
     print('SNIFFING', flush=True)
     while not stop.is_set():
         try:
@@ -93,20 +117,31 @@ def capture(interface: str, feedback: set[bytes], status: set[bytes],
             continue
         if address[2] == socket.PACKET_OUTGOING:
             continue
-        category = 'other'
+        category, again = 'other', False
         if frame[12:14] == b'\x08\x00' and frame[23] == 17:  # IPv4, UDP
             header = (frame[14] & 0x0f) * 4
             ident, fragment = struct.unpack('!HH', frame[18:22])
             key = (frame[26:30], ident)
             if fragment & 0x1fff:
-                category = first_fragment.get(key, 'other')
+                category, again = first_fragment.get(key, ('other', False))
             else:
-                category = classify(frame[14 + header + 8:], feedback, status)
+                payload = frame[14 + header + 8:]
+                category = classify(payload, feedback, status)
+                if category == 'feedback data':
+                    numbers = [n for n in data_sequence_numbers(payload) if n[0] in feedback]
+                    again = bool(numbers) and all(n in received for n in numbers)
+                    received.update(numbers)
                 if fragment & 0x2000:  # more fragments follow
-                    first_fragment[key] = category
+                    first_fragment[key] = (category, again)
         frames[category] += 1
         octets[category] += len(frame)
-    return {c: {'bytes': octets[c], 'packets': frames[c]} for c in CATEGORIES}
+        if again:
+            resent['bytes'] += len(frame)
+            resent['packets'] += 1
+    counts: dict[str, dict[str, int]] = {c: {'bytes': octets[c], 'packets': frames[c]}
+                                         for c in CATEGORIES}
+    counts['feedback data'].update(resent_bytes=resent['bytes'], resent_packets=resent['packets'])
+    return counts
 
 
 def main() -> None:

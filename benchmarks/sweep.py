@@ -21,7 +21,11 @@ achieved). A reduced grid, as in docs/BENCHMARKS.md::
     python -m benchmarks.sweep --clients 1,4,16,32,40 --goals 1,4 --rates 100 --sizes small
 
 ``--anatomy`` instead runs one point with a packet capture on one client per configuration, to
-break its received bytes down by kind (feedback data, GAPs, status, discovery).
+break its received bytes down by kind (feedback data, GAPs, status, discovery), and draws that
+breakdown (``docs/img/anatomy_n<N>m<M>_<size>.png``). Sizes: ``small`` (36 B), ``1k``, ``4k``
+and ``10k`` feedback messages (:data:`harness.load.SIZES`)::
+
+    python -m benchmarks.sweep --anatomy --clients 16 --goals 4 --rates 100 --sizes 4k
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import argparse
 import datetime
 import itertools
 import json
+import os
 import platform
 import sys
 import time
@@ -37,38 +42,32 @@ from pathlib import Path
 from typing import Any, Optional, Sequence
 
 from harness import load
+from harness.cli import float_list, int_list, name_list
 
 REPO = Path(__file__).resolve().parent.parent
 
-SIZES = {'small': 0, '10k': 2500}  # int32 elements of padding; 2500 makes a 10 kB message
+SIZES = load.SIZES  # int32 elements of padding: 'small' (36 B), '1k', '4k', '10k'
 #: Fast DDS's writer keeps filters for at most this many readers (reader_filters_allocation), unless
 #: the server guard raises the limit (CFT_ACTION_READER_FILTERS, default 1024).
 WRITER_FILTER_LIMIT = 32
-
-
-def _ints(text: str) -> list[int]:
-    return [int(v) for v in text.split(',') if v]
-
-
-def _floats(text: str) -> list[float]:
-    return [float(v) for v in text.split(',') if v]
 
 
 def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     """The command line; the defaults are the grid of the issue."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument('--clients', type=_ints, default=[1, 2, 4, 8, 16, 32, 40],
+    parser.add_argument('--clients', type=int_list, default=[1, 2, 4, 8, 16, 32, 40],
                         help='client process counts N, comma-separated')
-    parser.add_argument('--goals', type=_ints, default=[1, 4, 16],
+    parser.add_argument('--goals', type=int_list, default=[1, 4, 16],
                         help='goals per client M, comma-separated')
-    parser.add_argument('--rates', type=_floats, default=[10.0, 100.0],
+    parser.add_argument('--rates', type=float_list, default=[10.0, 100.0],
                         help='feedback rates per goal in Hz, comma-separated')
-    parser.add_argument('--sizes', default='small,10k',
+    parser.add_argument('--sizes', type=name_list(SIZES), default='small,10k',
                         help='feedback sizes, comma-separated, from: ' + ', '.join(SIZES))
     parser.add_argument('--duration', type=float, default=2.0,
                         help='seconds of feedback per goal (order = duration x rate)')
-    parser.add_argument('--configs', default='rclpy,client,goals,upstream',
+    parser.add_argument('--configs', type=name_list(load.CONFIG_LABELS),
+                        default='rclpy,client,goals,upstream',
                         help='comma-separated, from: ' + ', '.join(load.CONFIG_LABELS))
     parser.add_argument('--network', choices=('auto', 'netns', 'count'), default='auto')
     parser.add_argument('--drain-timeout', type=float, default=300.0,
@@ -84,15 +83,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--anatomy', action='store_true',
                         help='one point (the first of each list) with a packet capture on one '
                              'client per configuration')
-    args = parser.parse_args(argv)
-    args.sizes = [s.strip() for s in args.sizes.split(',') if s.strip()]
-    args.configs = [c.strip() for c in args.configs.split(',') if c.strip()]
-    for name, values, known in (('--sizes', args.sizes, SIZES),
-                                ('--configs', args.configs, load.CONFIG_LABELS)):
-        unknown = set(values) - set(known)
-        if unknown:
-            parser.error(f'{name}: unknown {", ".join(sorted(unknown))}')
-    return args
+    return parser.parse_args(argv)
 
 
 def grid(args: argparse.Namespace) -> list[dict[str, Any]]:
@@ -110,31 +101,6 @@ def default_output() -> Path:
     """``benchmarks/results/<date>-<host>.json``."""
     date = datetime.date.today().isoformat()
     return REPO / 'benchmarks' / 'results' / f'{date}-{platform.node()}.json'
-
-
-def capturing_run_class() -> type[load.LoadRun]:
-    """A load run that captures the first client's traffic in every phase (for ``--anatomy``)."""
-    from harness import netns
-    from harness.proc import Proc, python_module
-
-    class CapturingRun(load.LoadRun):
-        def window_started(self, clients: list[Proc],
-                           server_stats: dict[str, Any]) -> None:
-            if not self.topology:
-                raise RuntimeError('--anatomy needs network namespaces (root and iproute2)')
-            writers = server_stats['writers']
-            argv = python_module('benchmarks._capture', netns.INTERFACE,
-                                 ','.join(writers['feedback']), ','.join(writers['status']))
-            self._capture = Proc('capture', self.topology.command(self.topology.clients[0], argv),
-                                 self.env)
-            self._capture.expect('SNIFFING', 30)
-
-        def window_ended(self, clients: list[Proc]) -> dict[str, Any]:
-            anatomy = self._capture.request_json('stop', 'RESULT', timeout=30)
-            self._capture.stop()
-            return {'anatomy': anatomy}
-
-    return CapturingRun
 
 
 def run(args: argparse.Namespace) -> Path:
@@ -158,7 +124,7 @@ def run(args: argparse.Namespace) -> Path:
     def progress(line: str) -> None:
         print(f'[{time.monotonic() - started:7.1f} s] {line}', flush=True)
 
-    run_class = capturing_run_class() if args.anatomy else load.LoadRun
+    run_class = load.CapturingRun if args.anatomy else load.LoadRun
     for i, point in enumerate(points, 1):
         spec = load.LoadSpec(
             clients=point['clients'], goals=point['goals'], rate_hz=point['rate_hz'],
@@ -175,6 +141,7 @@ def run(args: argparse.Namespace) -> Path:
             result = {'spec': vars(spec).copy(), 'error': str(e), 'phases': []}
         result['size'] = point['size']
         result['elapsed_s'] = time.monotonic() - point_started
+        result['load_average_at_end'] = os.getloadavg()
         results['points'].append(result)
         results['elapsed_s'] = time.monotonic() - started
         output.write_text(json.dumps(results, indent=1))
@@ -333,9 +300,50 @@ def anatomy_table(phase: dict[str, Any]) -> str:
         total += entry['bytes']
         rows.append(f"| {category} | {entry['bytes'] / 1e3:.1f} | {entry['packets']} | "
                     f"{entry['bytes'] / own_payload:.2f} |" if own_payload else '')
+        if 'resent_bytes' in entry and own_payload:
+            rows.append(f"| … of which resent | {entry['resent_bytes'] / 1e3:.1f} | "
+                        f"{entry['resent_packets']} | {entry['resent_bytes'] / own_payload:.2f} |")
     rows.append(f"| **total** | {total / 1e3:.1f} | | {total / own_payload:.2f} |"
                 if own_payload else '')
+    without = total - phase['anatomy']['status']['bytes']
+    rows.append(f"| total without status | {without / 1e3:.1f} | | {without / own_payload:.2f} |"
+                if own_payload else '')
     return '\n'.join(rows) + '\n'
+
+
+def anatomy_plot(results: dict[str, Any], directory: Path) -> list[Path]:
+    """Draw each captured point's received bytes by kind, x own feedback payload, per
+    configuration (the first client of each phase); return the PNG paths."""
+    from benchmarks._capture import CATEGORIES
+    from harness.plot import pyplot, stacked_categories
+    plt = pyplot()
+    directory.mkdir(parents=True, exist_ok=True)
+    paths = []
+    for point in results['points']:
+        phases = [ph for ph in point['phases'] if 'anatomy' in ph]
+        if not phases:
+            continue
+        spec = point['spec']
+        labels, rows = [], []
+        for phase in phases:
+            own = phase['clients'][0]['own'] * phase['summary']['feedback_message_bytes']
+            labels.append(load.CONFIG_LABELS[phase['config']].replace(' ', '\n', 1))
+            rows.append({c: phase['anatomy'][c]['bytes'] / own if own else 0.0
+                         for c in CATEGORIES})
+        fig, ax = plt.subplots(figsize=(9, 4.8))
+        stacked_categories(ax, labels, rows)
+        ax.set_yscale('log' if max(sum(r.values()) for r in rows) > 20 else 'linear')
+        ax.axhline(1.0, color='k', ls='--', lw=1)
+        ax.set_ylabel('bytes received ÷ own feedback payload')
+        size = phases[0]['summary']['feedback_message_bytes']
+        ax.set_title(f"One client's received bytes by kind (captured), N={spec['clients']}, "
+                     f"M={spec['goals']}, {spec['rate_hz']:g} Hz, {size} B feedback\n"
+                     '(dashed: own feedback payload, the floor)', fontsize=10)
+        fig.tight_layout()
+        paths.append(directory / f"anatomy_n{spec['clients']}m{spec['goals']}_{point['size']}.png")
+        fig.savefig(paths[-1], dpi=100)
+        plt.close(fig)
+    return paths
 
 
 def _fmt(value: Optional[float], spec: str) -> str:
@@ -348,9 +356,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     path = args.plot_only or run(args)
     results = json.loads(path.read_text())
     print(markdown_tables(results))
-    if not args.anatomy:
-        for png in plot(results, args.plots):
-            print(f'plot: {png}')
+    for png in anatomy_plot(results, args.plots) if args.anatomy else plot(results, args.plots):
+        print(f'plot: {png}')
     return 0
 
 

@@ -12,9 +12,11 @@ every child process by :class:`harness.proc.Proc`. It imports ``cft_action`` and
   ``upstream``: the emulation of the upstream (Rolling) design;
 - ``load``: starts the server and the load clients, runs a load phase and accounts it (``make
   demo``, ``make bench``); ``netns``: one network namespace per client, so that bytes on the wire
-  can be counted; ``plot``: the plots;
+  can be counted; ``plot``: the plots; ``load.CapturingRun`` adds a packet capture
+  (``benchmarks._capture``) on one client per phase;
 - ``crash``: a server that may crash: its environment, its exit and its core; ``hazard``: one cell
   of the hazard matrix (``benchmarks/hazard.py``, the guard's tests);
+- ``cli``: command-line value types (comma-separated lists);
 - ``ros``: an rclpy session in this process; ``polling``: bounded waits in helper processes;
   ``param_nodes``: nodes whose parameters change on command.
 """

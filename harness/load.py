@@ -16,6 +16,13 @@ A phase goes:
 Bytes are the ``rx_bytes`` of each client's own network interface when network namespaces can be
 made (root, iproute2: see :mod:`harness.netns`); otherwise they are estimated as feedback messages
 taken x the serialized size of one feedback message, and the result says so.
+
+A spec may add *bystanders* (:attr:`LoadSpec.bystanders`): plain rclpy clients that run next to the
+phase's clients in every phase, with the same goals, and are accounted apart (a dashboard that
+receives every goal's feedback). A phase may also run fewer clients than the run's spec
+(``run_phase(config, clients=K)``), so that one server serves phases of several sizes.
+:class:`CapturingRun` adds a packet capture (``benchmarks._capture``) on the first client process
+of every phase, the first bystander when there are any.
 """
 
 from __future__ import annotations
@@ -54,6 +61,10 @@ RESULT_TIMEOUT_S = 2
 #: Memory one client may spend on queued feedback; bounds the queue depth for large messages.
 _QUEUE_BYTES = 256 * 1024 * 1024
 
+#: Feedback sizes by name: int32 elements of padding after the 3-element header of every feedback
+#: message, for 36 B (``small``), 1 kB, 4 kB and 10 kB messages (:func:`feedback_size`).
+SIZES = {'small': 0, '1k': 250, '4k': 1000, '10k': 2500}
+
 Progress = Callable[[str], None]
 
 
@@ -73,6 +84,10 @@ class LoadSpec:
     :ivar settle_s: seconds of quiet after the last goal before a phase is accounted (see
         :data:`SETTLE_S`).
     :ivar server_env: extra environment of the server process (e.g. the guard's settings).
+    :ivar bystanders: plain rclpy client processes started first in every phase, next to the
+        phase's N clients, with M goals each like them; they receive every goal's feedback. They
+        are reported apart (``phase['bystanders']``, ``phase['bystander_summary']``) and are not
+        part of the phase's per-client figures.
     """
 
     clients: int = 8
@@ -85,11 +100,17 @@ class LoadSpec:
     goals_timeout: Optional[float] = None
     settle_s: float = SETTLE_S
     server_env: dict[str, str] = dataclasses.field(default_factory=dict)
+    bystanders: int = 0
 
     @property
     def total_goals(self) -> int:
-        """N x M."""
+        """N x M: the goals of the phase's clients."""
         return self.clients * self.goals
+
+    @property
+    def all_goals(self) -> int:
+        """(N + bystanders) x M: every goal the server serves in a phase."""
+        return (self.clients + self.bystanders) * self.goals
 
 
 def feedback_size(pad: int) -> int:
@@ -109,7 +130,7 @@ def queue_depth(spec: LoadSpec) -> int:
     it, within :data:`_QUEUE_BYTES`: what overflows that is lost, and shows as own + foreign below
     what the server published.
     """
-    everything = spec.total_goals * spec.order + 100
+    everything = spec.all_goals * spec.order + 100
     return max(1000, min(everything, _QUEUE_BYTES // feedback_size(spec.pad)))
 
 
@@ -181,14 +202,17 @@ class LoadRun:
         return {}
 
     def _start_clients(self, config: str) -> list[Proc]:
+        """The bystanders (plain rclpy) first, then the phase's clients of ``config``."""
         spec = self.spec
+        roles = [('rclpy', f'bystander {i}') for i in range(spec.bystanders)]
+        roles += [(config, f'{config} client {i}') for i in range(spec.clients)]
         clients = []
-        for i in range(spec.clients):
-            argv = python_module('harness.client', self.action, config, spec.goals, spec.order,
+        for role, name in roles:
+            argv = python_module('harness.client', self.action, role, spec.goals, spec.order,
                                  self.depth)
             if self.topology:
                 argv = self.topology.command(self.topology.add_client(), argv)
-            clients.append(Proc(f'{config} client {i}', argv, self.env))
+            clients.append(Proc(name, argv, self.env))
         return clients
 
     def _network(self, clients: list[Proc]) -> list[Optional[dict[str, int]]]:
@@ -199,7 +223,7 @@ class LoadRun:
     def _wait_for_goals(self, before: dict[str, Any]) -> dict[str, Any]:
         """Wait until the server accepted and finished every goal of the phase."""
         spec = self.spec
-        expected = spec.total_goals * spec.order
+        expected = spec.all_goals * spec.order
         timeout = spec.goals_timeout or 120 + 30 * spec.order / spec.rate_hz
         deadline = time.monotonic() + timeout
         shown = 0.0
@@ -207,15 +231,15 @@ class LoadRun:
             stats = self.server_stats()
             published = stats['published'] - before['published']
             accepted = stats['accepted'] - before['accepted']
-            if accepted >= spec.total_goals and stats['active'] == 0:
+            if accepted >= spec.all_goals and stats['active'] == 0:
                 return stats
             if time.monotonic() > deadline:
                 raise RuntimeError(f'goals did not finish within {timeout:.0f} s: '
-                                   f'{accepted}/{spec.total_goals} accepted, '
+                                   f'{accepted}/{spec.all_goals} accepted, '
                                    f'{published}/{expected} feedback published')
             if time.monotonic() - shown >= 2:
                 shown = time.monotonic()
-                self.progress(f'    server: {accepted}/{spec.total_goals} goals accepted, '
+                self.progress(f'    server: {accepted}/{spec.all_goals} goals accepted, '
                               f'{published}/{expected} feedback published')
             time.sleep(0.25)
 
@@ -242,17 +266,40 @@ class LoadRun:
                 self.progress(f'    clients still taking feedback: {taken} taken so far')
             time.sleep(0.5)
 
-    def run_phase(self, config: str) -> dict[str, Any]:
-        """Run one configuration under this load; return its raw figures and summary."""
+    def run_phase(self, config: str, clients: Optional[int] = None) -> dict[str, Any]:
+        """Run one configuration under this load; return its raw figures and summary.
+
+        :param clients: the phase's client processes, at most the run's N (which sized the
+            queues); None: N. While the phase runs, ``self.spec`` is the phase's spec.
+        """
+        if clients is None or clients == self.spec.clients:
+            return self._run_phase(config)
+        if not 0 <= clients <= self.spec.clients:
+            raise ValueError(f'a phase may run 0 to {self.spec.clients} clients, not {clients}')
+        run_spec = self.spec
+        self.spec = dataclasses.replace(run_spec, clients=clients)
+        try:
+            return self._run_phase(config)
+        finally:
+            self.spec = run_spec
+
+    def _label(self, config: str) -> str:
         spec = self.spec
-        self.progress(f'[{CONFIG_LABELS[config]}] starting {spec.clients} client processes')
+        label = f'{CONFIG_LABELS[config]} x {spec.clients}'
+        return label + (f' + {spec.bystanders} bystander' if spec.bystanders else '')
+
+    def _run_phase(self, config: str) -> dict[str, Any]:
+        spec = self.spec
+        label = self._label(config)
+        processes = spec.clients + spec.bystanders
+        self.progress(f'[{label}] starting {processes} client processes')
         started = time.monotonic()
         clients = self._start_clients(config)
         try:
             for client in clients:
-                client.expect('READY', 120 + 2 * spec.clients)
+                client.expect('READY', 120 + 2 * processes)
             ready_s = time.monotonic() - started
-            self.progress(f'[{CONFIG_LABELS[config]}] {spec.clients} clients matched in '
+            self.progress(f'[{label}] {processes} clients matched in '
                           f'{ready_s:.1f} s; sending {spec.goals} goals each, {spec.order} '
                           f'feedback per goal at {spec.rate_hz:g} Hz')
             before = self.server_stats()
@@ -263,7 +310,7 @@ class LoadRun:
                 client.send('go')
             done = self._wait_for_goals(before)
             goals_s = time.monotonic() - go
-            self.progress(f'[{CONFIG_LABELS[config]}] goals finished in {goals_s:.1f} s; '
+            self.progress(f'[{label}] goals finished in {goals_s:.1f} s; '
                           'waiting for the clients to take the rest')
             self._wait_for_quiet(clients, time.monotonic())
             window_s = time.monotonic() - go
@@ -298,12 +345,43 @@ class LoadRun:
             'interval_s': after['interval_s'] - before['interval_s'],
             'guard': after.get('guard', ''),
             'ready_s': ready_s, 'goals_s': goals_s, 'window_s': window_s,
-            'clients': reports,
+            'n_clients': spec.clients,
+            'clients': reports[spec.bystanders:],
             **extra,
         }
         phase['summary'] = summarize(phase, spec, self.bytes_method)
+        if spec.bystanders:
+            phase['bystanders'] = reports[:spec.bystanders]
+            phase['bystander_summary'] = client_figures(phase['bystanders'], spec,
+                                                        self.bytes_method)
         time.sleep(1.0)  # let discovery retire this phase's readers before the next one matches
         return phase
+
+
+class CapturingRun(LoadRun):
+    """A load run that captures the traffic of the first client process of every phase.
+
+    The capture (``benchmarks._capture``) runs in that client's network namespace and sorts its
+    received frames by kind; the phase gets it as ``phase['anatomy']``. The first client process
+    is the first bystander when the spec has any, else the first of the phase's clients.
+    """
+
+    def window_started(self, clients: list[Proc], server_stats: dict[str, Any]) -> None:
+        """Start the capture once the clients are ready, before ``go``."""
+        if not self.topology:
+            raise RuntimeError('a packet capture needs network namespaces (root and iproute2)')
+        writers = server_stats['writers']
+        argv = python_module('benchmarks._capture', netns.INTERFACE,
+                             ','.join(writers['feedback']), ','.join(writers['status']))
+        self._capture = Proc('capture', self.topology.command(self.topology.clients[0], argv),
+                             self.env)
+        self._capture.expect('SNIFFING', 30)
+
+    def window_ended(self, clients: list[Proc]) -> dict[str, Any]:
+        """Stop the capture; its counts by category are the phase's ``anatomy``."""
+        anatomy = self._capture.request_json('stop', 'RESULT', timeout=30)
+        self._capture.stop()
+        return {'anatomy': anatomy}
 
 
 # --- accounting -----------------------------------------------------------------------------------
@@ -316,49 +394,35 @@ def percentile(values: Sequence[float], q: float) -> Optional[float]:
     return ordered[min(len(ordered) - 1, max(0, round(q * len(ordered)) - 1))]
 
 
-def summarize(phase: dict[str, Any], spec: LoadSpec, bytes_method: str) -> dict[str, Any]:
-    """Per-client means and totals of one phase; moves the latency samples into percentiles."""
-    clients = phase['clients']
+def _mean(values: Sequence[float]) -> Optional[float]:
+    return statistics.fmean(values) if values else None
+
+
+def client_figures(clients: list[dict[str, Any]], spec: LoadSpec,
+                   bytes_method: str) -> dict[str, Any]:
+    """Per-client means and totals of the reports ``clients``; moves their latency samples into
+    percentiles. With no clients, the means are None."""
     size = feedback_size(spec.pad)
     latencies = [v for c in clients for v in c.pop('latency_us')]
     for c in clients:
         c['est_bytes'] = (c['own'] + c['foreign']) * size
     byte_key = 'rx_bytes' if bytes_method == 'netns' else 'est_bytes'
-    mean = statistics.fmean
-    own_mean = mean(c['own'] for c in clients)
+    own_mean = _mean([c['own'] for c in clients])
     bytes_per_client = [c[byte_key] for c in clients]
-    updates = sum(c['updates'] for c in clients)
     return {
         'own_per_client': own_mean,
-        'foreign_per_client': mean(c['foreign'] for c in clients),
+        'foreign_per_client': _mean([c['foreign'] for c in clients]),
         'expected_own_per_client': spec.goals * spec.order,
-        'all_feedback': phase['published'],
-        'callbacks_per_client': mean(c['callbacks'] for c in clients),
+        'callbacks_per_client': _mean([c['callbacks'] for c in clients]),
         'misrouted': sum(c['misrouted'] for c in clients),
         'bytes_method': bytes_method,
-        'bytes_per_client': mean(bytes_per_client),
-        'bytes_per_client_min': min(bytes_per_client),
-        'bytes_per_client_max': max(bytes_per_client),
-        'own_feedback_bytes_per_client': own_mean * size,
+        'bytes_per_client': _mean(bytes_per_client),
+        'bytes_per_client_min': min(bytes_per_client, default=None),
+        'bytes_per_client_max': max(bytes_per_client, default=None),
+        'own_feedback_bytes_per_client': None if own_mean is None else own_mean * size,
         'feedback_message_bytes': size,
         'client_cpu_s': sum(c['cpu_s'] for c in clients),
-        'client_cpu_s_per_client': mean(c['cpu_s'] for c in clients),
-        'server_cpu_s': phase['server_cpu_s'],
-        # The server's side, from go until its last goal finished: what its publishing achieved.
-        'server_msgs_per_s': (phase['published_at_goals'] / phase['goals_s']
-                              if phase['goals_s'] else None),
-        'server_cpu_ms_per_msg': (1000 * phase['server_cpu_goals_s'] / phase['published_at_goals']
-                                  if phase['published_at_goals'] else None),
-        'updates': updates,
-        'updates_per_goal': updates / spec.total_goals,
-        'recreations': sum(c.get('recreations', 0) for c in clients),
-        'filters_disabled': sum(1 for c in clients
-                                if phase['config'] == 'upstream' and not c['active']),
-        # Feedback per second per goal, first to last: below rate_hz when the server could not
-        # keep the rate (late_ticks counts that).
-        'achieved_rate_hz': (phase['intervals'] / phase['interval_s']
-                             if phase['interval_s'] else None),
-        'late_ticks': phase['late_ticks'],
+        'client_cpu_s_per_client': _mean([c['cpu_s'] for c in clients]),
         'latency_samples': len(latencies),
         'latency_p50_ms': _ms(percentile(latencies, 0.50)),
         'latency_p90_ms': _ms(percentile(latencies, 0.90)),
@@ -367,12 +431,43 @@ def summarize(phase: dict[str, Any], spec: LoadSpec, bytes_method: str) -> dict[
     }
 
 
+def summarize(phase: dict[str, Any], spec: LoadSpec, bytes_method: str) -> dict[str, Any]:
+    """The phase's clients' figures (:func:`client_figures`) and the server's side of it."""
+    clients = phase['clients']
+    updates = sum(c['updates'] for c in clients)
+    return {
+        **client_figures(clients, spec, bytes_method),
+        'all_feedback': phase['published'],
+        'server_cpu_s': phase['server_cpu_s'],
+        # The server's side, from go until its last goal finished: what its publishing achieved.
+        'server_msgs_per_s': (phase['published_at_goals'] / phase['goals_s']
+                              if phase['goals_s'] else None),
+        'server_cpu_ms_per_msg': (1000 * phase['server_cpu_goals_s'] / phase['published_at_goals']
+                                  if phase['published_at_goals'] else None),
+        'updates': updates,
+        'updates_per_goal': updates / spec.total_goals if spec.total_goals else None,
+        'recreations': sum(c.get('recreations', 0) for c in clients),
+        'filters_disabled': sum(1 for c in clients
+                                if phase['config'] == 'upstream' and not c['active']),
+        # Feedback per second per goal, first to last: below rate_hz when the server could not
+        # keep the rate (late_ticks counts that).
+        'achieved_rate_hz': (phase['intervals'] / phase['interval_s']
+                             if phase['interval_s'] else None),
+        'late_ticks': phase['late_ticks'],
+    }
+
+
 def _ms(us: Optional[float]) -> Optional[float]:
     return None if us is None else us / 1000.0
 
 
 def add_ratios(phases: list[dict[str, Any]]) -> None:
-    """Add ``ratio_to_plain`` to every summary, when a plain rclpy phase is among ``phases``."""
+    """Add ``bytes_to_own_feedback`` to every summary, and ``ratio_to_plain`` when a plain rclpy
+    phase is among ``phases``."""
+    for phase in phases:
+        s = phase['summary']
+        s['bytes_to_own_feedback'] = (s['bytes_per_client'] / s['own_feedback_bytes_per_client']
+                                      if s['own_feedback_bytes_per_client'] else None)
     plain = next((p['summary'] for p in phases if p['config'] == 'rclpy'), None)
     if plain is None:
         return
@@ -383,8 +478,6 @@ def add_ratios(phases: list[dict[str, Any]]) -> None:
         s = phase['summary']
         s['ratio_to_plain'] = {name: (s[k] / plain[k] if s[k] is not None and plain[k] else None)
                                for name, k in keys.items()}
-        s['bytes_to_own_feedback'] = (s['bytes_per_client'] / s['own_feedback_bytes_per_client']
-                                      if s['own_feedback_bytes_per_client'] else None)
 
 
 def run_load(spec: LoadSpec, configs: Sequence[str], progress: Progress = print,

@@ -124,3 +124,29 @@ def _annotate(ax: Any, x: Any, heights: list[float], texts: list[str]) -> None:
     for i, (h, t) in enumerate(zip(heights, texts)):
         ax.text(i, h, t, ha='center', va='bottom', fontsize=8)
     ax.margins(y=0.15)
+
+
+#: The kinds of received bytes of a packet capture (``benchmarks._capture.CATEGORIES``), with
+#: their colours.
+CATEGORY_COLOURS = {'feedback data': '#1f77b4', 'feedback gap/heartbeat': '#aec7e8',
+                    'status': '#ff7f0e', 'discovery': '#2ca02c', 'other': '#c7c7c7'}
+
+
+def stacked_categories(ax: Any, labels: list[str], rows: list[dict[str, float]],
+                       total_format: str = '.2f') -> None:
+    """Stacked bars on ``ax``, one per label: ``rows[i]`` maps each capture category to a height.
+
+    The total is written on top of each bar; the categories of :data:`CATEGORY_COLOURS` stack in
+    that order, with a legend.
+    """
+    x = list(range(len(labels)))
+    bottoms = [0.0] * len(labels)
+    for category, colour in CATEGORY_COLOURS.items():
+        heights = [row.get(category, 0.0) for row in rows]
+        ax.bar(x, heights, bottom=bottoms, color=colour, label=category)
+        bottoms = [b + h for b, h in zip(bottoms, heights)]
+    for i, total in enumerate(bottoms):
+        ax.text(i, total, format(total, total_format), ha='center', va='bottom', fontsize=8)
+    ax.set_xticks(x, labels, fontsize=8)
+    ax.margins(y=0.12)
+    ax.legend(fontsize=7, loc='upper left', bbox_to_anchor=(1.01, 1.0))
