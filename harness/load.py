@@ -45,9 +45,10 @@ CONFIG_LABELS = {
 #: goals' terms (an update that belongs to the phase).
 SETTLE_S = FINISHED_GOAL_GRACE + 2.5
 
-#: Seconds a finished goal stays on the server. Every status message lists all goals the server
-#: keeps, and goes to every client: with rclpy's default of 900 s each phase of a run would carry
-#: the goals of all earlier phases, and later configurations would receive more status bytes.
+#: Seconds a finished goal stays on the server, unless a spec says otherwise. Every status message
+#: lists all goals the server keeps, and goes to every client: with rclpy's default of 900 s each
+#: phase of a run would carry the goals of all earlier phases, and later configurations would
+#: receive more status bytes.
 #: The load clients never ask for results, so nothing else depends on it.
 RESULT_TIMEOUT_S = 2
 
@@ -69,10 +70,15 @@ class LoadSpec:
     :ivar network: ``'auto'`` (namespaces when possible), ``'netns'`` or ``'count'``.
     :ivar drain_timeout: seconds a phase may take after its goals finished, for slow clients.
     :ivar goals_timeout: seconds the goals of a phase may take; None: 120 + 30 x their nominal
-        duration (a saturated machine runs them several times slower).
+        duration (a saturated machine runs them several times slower), plus the time their
+        sending takes with ``goal_interval_s``.
     :ivar settle_s: seconds of quiet after the last goal before a phase is accounted (see
         :data:`SETTLE_S`).
     :ivar server_env: extra environment of the server process (e.g. the guard's settings).
+    :ivar result_timeout_s: seconds the server keeps a finished goal (and lists it in every status
+        message); see :data:`RESULT_TIMEOUT_S`.
+    :ivar goal_interval_s: 0: each client sends its goals at once on ``go``; else one every this
+        many seconds.
     """
 
     clients: int = 8
@@ -85,6 +91,8 @@ class LoadSpec:
     goals_timeout: Optional[float] = None
     settle_s: float = SETTLE_S
     server_env: dict[str, str] = dataclasses.field(default_factory=dict)
+    result_timeout_s: int = RESULT_TIMEOUT_S
+    goal_interval_s: float = 0.0
 
     @property
     def total_goals(self) -> int:
@@ -151,7 +159,7 @@ class LoadRun:
                                  f'({feedback_size(spec.pad)} B), no headers, status or discovery: '
                                  f'no network namespaces ({reason})')
         argv = python_module('harness.server', self.action, 1.0 / spec.rate_hz, '--pad', spec.pad,
-                             '--depth', self.depth, '--result-timeout', RESULT_TIMEOUT_S)
+                             '--depth', self.depth, '--result-timeout', spec.result_timeout_s)
         if self.topology:
             argv = self.topology.command(self.topology.server, argv)
         self.server = Proc('server', argv, guard.environment({**self.env, **spec.server_env}))
@@ -185,7 +193,7 @@ class LoadRun:
         clients = []
         for i in range(spec.clients):
             argv = python_module('harness.client', self.action, config, spec.goals, spec.order,
-                                 self.depth)
+                                 self.depth, spec.goal_interval_s)
             if self.topology:
                 argv = self.topology.command(self.topology.add_client(), argv)
             clients.append(Proc(f'{config} client {i}', argv, self.env))
@@ -200,7 +208,8 @@ class LoadRun:
         """Wait until the server accepted and finished every goal of the phase."""
         spec = self.spec
         expected = spec.total_goals * spec.order
-        timeout = spec.goals_timeout or 120 + 30 * spec.order / spec.rate_hz
+        timeout = spec.goals_timeout or (120 + 30 * spec.order / spec.rate_hz
+                                         + spec.goals * spec.goal_interval_s)
         deadline = time.monotonic() + timeout
         shown = 0.0
         while True:
@@ -364,6 +373,11 @@ def summarize(phase: dict[str, Any], spec: LoadSpec, bytes_method: str) -> dict[
         'latency_p90_ms': _ms(percentile(latencies, 0.90)),
         'latency_p99_ms': _ms(percentile(latencies, 0.99)),
         'latency_max_ms': _ms(max(latencies) if latencies else None),
+        # Status messages taken from rcl (not those the keep-last-1 reader dropped unread).
+        'status_per_client': mean(c.get('status', 0) for c in clients),
+        'status_entries_per_client': mean(c.get('status_entries', 0) for c in clients),
+        'status_cdr_bytes_per_client': mean(c.get('status_cdr_bytes', 0) for c in clients),
+        'status_max_entries': max(c.get('status_max_entries', 0) for c in clients),
     }
 
 
