@@ -112,31 +112,6 @@ def default_output() -> Path:
     return REPO / 'benchmarks' / 'results' / f'{date}-{platform.node()}.json'
 
 
-def capturing_run_class() -> type[load.LoadRun]:
-    """A load run that captures the first client's traffic in every phase (for ``--anatomy``)."""
-    from harness import netns
-    from harness.proc import Proc, python_module
-
-    class CapturingRun(load.LoadRun):
-        def window_started(self, clients: list[Proc],
-                           server_stats: dict[str, Any]) -> None:
-            if not self.topology:
-                raise RuntimeError('--anatomy needs network namespaces (root and iproute2)')
-            writers = server_stats['writers']
-            argv = python_module('benchmarks._capture', netns.INTERFACE,
-                                 ','.join(writers['feedback']), ','.join(writers['status']))
-            self._capture = Proc('capture', self.topology.command(self.topology.clients[0], argv),
-                                 self.env)
-            self._capture.expect('SNIFFING', 30)
-
-        def window_ended(self, clients: list[Proc]) -> dict[str, Any]:
-            anatomy = self._capture.request_json('stop', 'RESULT', timeout=30)
-            self._capture.stop()
-            return {'anatomy': anatomy}
-
-    return CapturingRun
-
-
 def run(args: argparse.Namespace) -> Path:
     """Run the sweep, writing the results file after every point; return its path."""
     output = args.output or default_output()
@@ -158,7 +133,7 @@ def run(args: argparse.Namespace) -> Path:
     def progress(line: str) -> None:
         print(f'[{time.monotonic() - started:7.1f} s] {line}', flush=True)
 
-    run_class = capturing_run_class() if args.anatomy else load.LoadRun
+    run_class = load.CapturingRun if args.anatomy else load.LoadRun
     for i, point in enumerate(points, 1):
         spec = load.LoadSpec(
             clients=point['clients'], goals=point['goals'], rate_hz=point['rate_hz'],

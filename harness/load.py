@@ -15,7 +15,9 @@ A phase goes:
 
 Bytes are the ``rx_bytes`` of each client's own network interface when network namespaces can be
 made (root, iproute2: see :mod:`harness.netns`); otherwise they are estimated as feedback messages
-taken x the serialized size of one feedback message, and the result says so.
+taken x the serialized size of one feedback message, and the result says so. :class:`CapturingRun`
+also breaks the first client's received bytes down by kind, with a packet capture
+(``benchmarks/_capture.py``, run as a child process in that client's namespace).
 """
 
 from __future__ import annotations
@@ -313,6 +315,33 @@ class LoadRun:
         phase['summary'] = summarize(phase, spec, self.bytes_method)
         time.sleep(1.0)  # let discovery retire this phase's readers before the next one matches
         return phase
+
+
+class CapturingRun(LoadRun):
+    """A load run that captures the first client's received frames in every phase.
+
+    ``benchmarks/_capture.py`` runs in that client's namespace from :meth:`window_started` to
+    :meth:`window_ended`, and the phase gets its ``anatomy``: bytes, packets and samples by kind
+    (feedback data, feedback gap/heartbeat, status, discovery, other). Capturing costs CPU on the
+    machine being measured, so a run with it is a run of its own.
+    """
+
+    def window_started(self, clients: list[Proc], server_stats: dict[str, Any]) -> None:
+        """Start the capture on the first client's interface; return once it listens."""
+        if not self.topology:
+            raise RuntimeError('a packet capture needs network namespaces (root and iproute2)')
+        writers = server_stats['writers']
+        argv = python_module('benchmarks._capture', netns.INTERFACE,
+                             ','.join(writers['feedback']), ','.join(writers['status']))
+        self._capture = Proc('capture', self.topology.command(self.topology.clients[0], argv),
+                             self.env)
+        self._capture.expect('SNIFFING', 30)
+
+    def window_ended(self, clients: list[Proc]) -> dict[str, Any]:
+        """Stop the capture; its counts are the phase's ``anatomy``."""
+        anatomy = self._capture.request_json('stop', 'RESULT', timeout=30)
+        self._capture.stop()
+        return {'anatomy': anatomy}
 
 
 # --- accounting -----------------------------------------------------------------------------------
