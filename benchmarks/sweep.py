@@ -46,10 +46,6 @@ SIZES = {'small': 0, '10k': 2500}  # int32 elements of padding; 2500 makes a 10 
 WRITER_FILTER_LIMIT = 32
 
 
-def _ints(text: str) -> list[int]:
-    return [int(v) for v in text.split(',') if v]
-
-
 def _floats(text: str) -> list[float]:
     return [float(v) for v in text.split(',') if v]
 
@@ -58,9 +54,9 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     """The command line; the defaults are the grid of the issue."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument('--clients', type=_ints, default=[1, 2, 4, 8, 16, 32, 40],
+    parser.add_argument('--clients', type=load.int_list, default=[1, 2, 4, 8, 16, 32, 40],
                         help='client process counts N, comma-separated')
-    parser.add_argument('--goals', type=_ints, default=[1, 4, 16],
+    parser.add_argument('--goals', type=load.int_list, default=[1, 4, 16],
                         help='goals per client M, comma-separated')
     parser.add_argument('--rates', type=_floats, default=[10.0, 100.0],
                         help='feedback rates per goal in Hz, comma-separated')
