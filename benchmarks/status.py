@@ -141,11 +141,17 @@ class StatusRun(load.CapturingRun):
                                                        'goal_response_errors', 'accepted')}
         if self.spec.result_timeout_s <= PROBE_WAIT_MAX_S:
             time.sleep(self.spec.result_timeout_s + 0.5)
+        self._window_t = time.monotonic()
         super().window_started(clients, server_stats)
 
     def window_ended(self, clients: list[Proc]) -> dict[str, Any]:
-        """The capture's counts, and the server's goal-request counters before ``go``."""
-        return {**super().window_ended(clients), 'server_before_go': self._requests}
+        """The capture's counts, the server's goal-request counters before ``go``, and when the
+        server took each goal request of the window (s after the first; the same monotonic clock
+        in every process)."""
+        takes = [t for _, t in self.server.request_json('takes', 'TAKES')
+                 if t >= self._window_t]
+        return {**super().window_ended(clients), 'server_before_go': self._requests,
+                'accept_times': [t - min(takes) for t in sorted(takes)]}
 
 
 def _arrivals(text: str) -> tuple[int, int, float]:
@@ -209,24 +215,33 @@ def points(args: argparse.Namespace) -> list[tuple[str, load.LoadSpec, list[str]
     return out
 
 
-def model_for(spec: dict[str, Any], held_at_go: Optional[int] = None) -> dict[str, float]:
+def model_for(spec: dict[str, Any], held_at_go: Optional[int] = None,
+              goals_s: Optional[float] = None,
+              accept_times: Optional[Sequence[float]] = None) -> dict[str, float]:
     """The model's figures for a load point (a :class:`harness.load.LoadSpec` as a dict).
 
     ``held_at_go``: the goals the server held at ``go``, as measured; None: the clients' probes
     when the phase did not wait for them to expire, else none. Measured ones that outlived the
-    wait for the probes stay held through the window.
+    wait for the probes stay held through the window. ``goals_s``: the measured seconds from
+    ``go`` until the last goal finished; with goals sent over time, their interval is taken from
+    it (a client's timer runs a little slower than its period on a loaded machine), else from the
+    spec. ``accept_times``: when the server took each goal request, measured; they replace the
+    schedule (the spec's: all at once, or one per interval per client).
     """
-    interval = spec['goal_interval_s']
     timeout = spec['result_timeout_s']
+    # The ticker finishes a goal at its order-th tick after the first feedback: the first tick
+    # comes 0 to 1 period after acceptance, so a goal lasts (order - 0.5) periods on average.
+    duration = (spec['order'] - 0.5) / spec['rate_hz']
+    interval = spec['goal_interval_s']
+    if interval and goals_s is not None and spec['goals'] > 1:
+        interval = (goals_s - duration) / (spec['goals'] - 1)
     # Every client sends its k-th goal at k x interval (all at 0 without an interval).
-    accepted = [k * interval for k in range(spec['goals']) for _ in range(spec['clients'])]
+    accepted = list(accept_times) if accept_times else [
+        k * interval for k in range(spec['goals']) for _ in range(spec['clients'])]
     waited = timeout <= PROBE_WAIT_MAX_S
     if held_at_go is None:
         held_at_go = 0 if waited else spec['clients']
     held_s = math.inf if waited else timeout
-    # The ticker finishes a goal at its order-th tick after the first feedback: the first tick
-    # comes 0 to 1 period after acceptance, so a goal lasts (order - 0.5) periods on average.
-    duration = (spec['order'] - 0.5) / spec['rate_hz']
     return predict(accepted, duration, timeout, held_at_go, held_s, spec['clients'])
 
 
@@ -268,7 +283,10 @@ def analyse(point: dict[str, Any]) -> dict[str, Any]:
     """Add the status figures and the model to a point and its phases, from their raw figures."""
     for phase in point['phases']:
         phase['status'] = figures(phase, point['spec']['clients'])
-        phase['model'] = model_for(point['spec'], phase['status']['held_at_go'])
+        phase['model_schedule'] = model_for(point['spec'], phase['status']['held_at_go'],
+                                            phase['goals_s'])
+        phase['model'] = model_for(point['spec'], phase['status']['held_at_go'],
+                                   phase['goals_s'], phase.get('accept_times'))
     point['model'] = model_for(point['spec'])
     return point
 
@@ -335,8 +353,11 @@ def _figure(key: str, spec: str, scale: float = 1.0) -> Callable[[dict[str, Any]
     return cell
 
 
-def _vs_model(point: dict[str, Any], phase: dict[str, Any]) -> str:
-    return f"{phase['status']['status_bytes'] / phase['model']['wire_bytes']:.2f}"
+def _vs(model: str) -> Callable[[dict[str, Any], dict[str, Any]], str]:
+    """A cell: measured status bytes over the phase's ``model``."""
+    def cell(point: dict[str, Any], phase: dict[str, Any]) -> str:
+        return f"{phase['status']['status_bytes'] / phase[model]['wire_bytes']:.2f}"
+    return cell
 
 
 _CONFIG: Column = ('configuration', lambda p, ph: load.CONFIG_LABELS[ph['config']])
@@ -347,8 +368,11 @@ _STATUS: list[Column] = [
     ('status share', _figure('status_share', '.0%')),
 ]
 _MODEL: list[Column] = [
-    ('model kB', lambda p, ph: f"{ph['model']['wire_bytes'] / 1e3:.1f}"),
-    ('measured/model', _vs_model),
+    ('model kB, schedule', lambda p, ph: f"{ph['model_schedule']['wire_bytes'] / 1e3:.1f}"),
+    ('measured/model', _vs('model_schedule')),
+    ('model kB, arrivals', lambda p, ph: (f"{ph['model']['wire_bytes'] / 1e3:.1f}"
+                                          if ph.get('accept_times') else '-')),
+    ('measured/model', lambda p, ph: _vs('model')(p, ph) if ph.get('accept_times') else '-'),
 ]
 
 GRID_COLUMNS: list[Column] = [
