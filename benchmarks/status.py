@@ -392,6 +392,7 @@ TIMEOUT_COLUMNS: list[Column] = [
     ('largest kB', _figure('datagram_max', '.1f', 1e-3)), *_MODEL,
     ('model max entries', lambda p, ph: str(ph['model']['max_entries'])),
     ('rx kB/client', _figure('rx_bytes_per_client', '.0f', 1e-3)),
+    ('client CPU s', _figure('client_cpu_s_per_client', '.2f')),
 ]
 
 
@@ -448,8 +449,14 @@ def plot(all_points: list[dict[str, Any]], path: Path) -> Path:
         for config, marker in markers.items():
             _measured(axes[0], row, lambda p: p['spec']['clients'], config, marker, f'C{k}',
                       f'M={m}, {load.CONFIG_LABELS[config]}')
+    arrivals = [(p['spec']['clients'], ph['model']['wire_bytes'] / 1e3)
+                for p in grid for ph in p['phases'] if ph.get('accept_times')]
+    if arrivals:
+        axes[0].plot(*zip(*arrivals), 'k_', ms=14, mew=2,
+                     label="model, the server's measured arrivals")
     finish_axes(axes[0], 'client processes N (M goals each, sent at once; log)', ylabel,
-                'status bytes per client vs N\n(result_timeout 2 s; dashed: model)', xbase=2)
+                'status bytes per client vs N\n(result_timeout 2 s; dashed: model, goals at once)',
+                xbase=2)
 
     timeouts = sorted((p for p in all_points if p['part'] == 'timeouts' and p['phases']),
                       key=lambda p: p['spec']['result_timeout_s'])

@@ -30,7 +30,8 @@ def finish_axes(ax: Any, xlabel: str, ylabel: str, title: str, xbase: int = 10,
     ax.set_ylabel(ylabel)
     ax.set_title(title, fontsize=10)
     ax.grid(True, which='both', alpha=0.3)
-    ax.legend(fontsize=7)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
 
 
 def demo_figure(result: dict[str, Any], path: Path) -> Path:
