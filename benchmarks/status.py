@@ -217,7 +217,8 @@ def points(args: argparse.Namespace) -> list[tuple[str, load.LoadSpec, list[str]
 
 def model_for(spec: dict[str, Any], held_at_go: Optional[int] = None,
               goals_s: Optional[float] = None,
-              accept_times: Optional[Sequence[float]] = None) -> dict[str, float]:
+              accept_times: Optional[Sequence[float]] = None,
+              period_s: Optional[float] = None) -> dict[str, float]:
     """The model's figures for a load point (a :class:`harness.load.LoadSpec` as a dict).
 
     ``held_at_go``: the goals the server held at ``go``, as measured; None: the clients' probes
@@ -226,12 +227,14 @@ def model_for(spec: dict[str, Any], held_at_go: Optional[int] = None,
     ``go`` until the last goal finished; with goals sent over time, their interval is taken from
     it (a client's timer runs a little slower than its period on a loaded machine), else from the
     spec. ``accept_times``: when the server took each goal request, measured; they replace the
-    schedule (the spec's: all at once, or one per interval per client).
+    schedule (the spec's: all at once, or one per interval per client). ``period_s``: the
+    feedback period the server achieved, measured; a goal's life is taken from it (a loaded
+    server ticks late), else from the spec's rate.
     """
     timeout = spec['result_timeout_s']
     # The ticker finishes a goal at its order-th tick after the first feedback: the first tick
     # comes 0 to 1 period after acceptance, so a goal lasts (order - 0.5) periods on average.
-    duration = (spec['order'] - 0.5) / spec['rate_hz']
+    duration = (spec['order'] - 0.5) * (period_s or 1.0 / spec['rate_hz'])
     interval = spec['goal_interval_s']
     if interval and goals_s is not None and spec['goals'] > 1:
         interval = (goals_s - duration) / (spec['goals'] - 1)
@@ -285,8 +288,9 @@ def analyse(point: dict[str, Any]) -> dict[str, Any]:
         phase['status'] = figures(phase, point['spec']['clients'])
         phase['model_schedule'] = model_for(point['spec'], phase['status']['held_at_go'],
                                             phase['goals_s'])
+        achieved = phase['interval_s'] / phase['intervals'] if phase['intervals'] else None
         phase['model'] = model_for(point['spec'], phase['status']['held_at_go'],
-                                   phase['goals_s'], phase.get('accept_times'))
+                                   phase['goals_s'], phase.get('accept_times'), achieved)
     point['model'] = model_for(point['spec'])
     return point
 
@@ -367,9 +371,11 @@ _STATUS: list[Column] = [
     ('samples', _figure('status_samples', 'd')),
     ('status share', _figure('status_share', '.0%')),
 ]
-_MODEL: list[Column] = [
+_SCHEDULE: list[Column] = [
     ('model kB, schedule', lambda p, ph: f"{ph['model_schedule']['wire_bytes'] / 1e3:.1f}"),
     ('measured/model', _vs('model_schedule')),
+]
+_ARRIVALS: list[Column] = [
     ('model kB, arrivals', lambda p, ph: (f"{ph['model']['wire_bytes'] / 1e3:.1f}"
                                           if ph.get('accept_times') else '-')),
     ('measured/model', lambda p, ph: _vs('model')(p, ph) if ph.get('accept_times') else '-'),
@@ -378,7 +384,7 @@ _MODEL: list[Column] = [
 GRID_COLUMNS: list[Column] = [
     ('N', lambda p, ph: str(p['spec']['clients'])), ('M', lambda p, ph: str(p['spec']['goals'])),
     _GOALS, _CONFIG, *_STATUS, ('feedback share', _figure('feedback_share', '.0%')),
-    ('held at go', _figure('held_at_go', 'd')), *_MODEL,
+    ('held at go', _figure('held_at_go', 'd')), *_SCHEDULE, *_ARRIVALS,
     ('taken/client', _figure('status_taken_per_client', '.0f')),
     ('max entries', _figure('max_entries_wire', '.0f')),
     ('rx kB/client', _figure('rx_bytes_per_client', '.0f', 1e-3)),
@@ -389,7 +395,7 @@ TIMEOUT_COLUMNS: list[Column] = [
     *_STATUS, ('bytes/sample', _figure('wire_bytes_per_sample', '.0f')),
     ('entries/sample', _figure('entries_per_sample', '.1f')),
     ('max entries', _figure('max_entries_wire', '.0f')),
-    ('largest kB', _figure('datagram_max', '.1f', 1e-3)), *_MODEL,
+    ('largest kB', _figure('datagram_max', '.1f', 1e-3)), *_SCHEDULE,
     ('model max entries', lambda p, ph: str(ph['model']['max_entries'])),
     ('rx kB/client', _figure('rx_bytes_per_client', '.0f', 1e-3)),
     ('client CPU s', _figure('client_cpu_s_per_client', '.2f')),
