@@ -14,8 +14,9 @@ serialized size (:mod:`harness.client`):
 
 - ``grid``: N client processes x M goals each, all sent at once, for each configuration (plain
   rclpy and ``client`` mode by default), the server keeping finished goals 2 s;
-- ``timeouts``: goals arriving over time (N clients, one goal each every ``--interval`` seconds),
-  against servers with each ``result_timeout`` in turn, so that finished goals accumulate.
+- ``timeouts``: goals arriving over time (``--arrivals CLIENTS,GOALS,INTERVAL``: each client
+  sends a goal every INTERVAL seconds), against servers with each ``result_timeout`` in turn, so
+  that finished goals accumulate.
 
 Before ``go`` a phase waits until the clients' probe goals (:mod:`harness.client`) have expired
 (when ``result_timeout`` is at most :data:`PROBE_WAIT_MAX_S`), so the window starts with an empty
