@@ -4,7 +4,11 @@ Run inside a client's network namespace (needs root, as the namespaces do):
 ``python -m benchmarks._capture INTERFACE FEEDBACK_GUIDS STATUS_GUIDS`` (GUIDs in hex,
 comma-separated). It prints
 ``SNIFFING`` once it listens, and on the line ``stop`` prints ``RESULT <json>``: received bytes
-and packets (whole Ethernet frames, as ``rx_bytes`` counts them) by category:
+and packets (whole Ethernet frames, as ``rx_bytes`` counts them) by category, and ``samples``: the
+DATA submessages (a fragmented sample once) of the feedback writers in ``feedback data`` and of the
+status writers in ``status``, i.e. the samples the writer sent this client (0 in the others); and
+for ``status`` also ``datagrams``, the UDP length of each datagram that starts a status sample
+(whole, before IP fragmentation: the size of one status message on the wire):
 
 - ``feedback data``: packets with a DATA submessage of the action's feedback writer;
 - ``feedback gap/heartbeat``: other packets from that writer (GAPs for samples the writer
@@ -41,18 +45,22 @@ _DATA, _DATA_FRAG = 0x15, 0x16
 _WRITER_AFTER_READER = (0x07, 0x08, 0x13, 0x06, 0x12)
 
 
-def _writer_ids(payload: bytes) -> list[tuple[int, bytes]]:
-    """(submessage id, writer entity id) of each RTPS submessage that names a writer."""
+def _writer_ids(payload: bytes) -> list[tuple[int, bytes, bool]]:
+    """(submessage id, writer entity id, starts a sample) of each RTPS submessage that names a
+    writer; a sample starts with a DATA, or with the DATA_FRAG of its first fragment."""
     found = []
     offset = 20  # RTPS header: 'RTPS', version, vendor, GUID prefix
     while offset + 4 <= len(payload):
         kind, flags = payload[offset], payload[offset + 1]
         length = struct.unpack('<H' if flags & 1 else '>H', payload[offset + 2:offset + 4])[0]
         body = payload[offset + 4:offset + 4 + length] if length else payload[offset + 4:]
-        if kind in (_DATA, _DATA_FRAG):
-            found.append((kind, body[8:12]))  # extraFlags, octetsToInlineQos, readerId, writerId
+        if kind == _DATA:
+            found.append((kind, body[8:12], True))  # extraFlags, octetsToInlineQos, readerId,
+        elif kind == _DATA_FRAG:                    # writerId, then writerSN (8 bytes)
+            first = struct.unpack('<I' if flags & 1 else '>I', body[20:24])[0] == 1
+            found.append((kind, body[8:12], first))
         elif kind in _WRITER_AFTER_READER:
-            found.append((kind, body[4:8]))
+            found.append((kind, body[4:8], False))
         if length == 0:  # the last submessage extends to the end of the datagram
             break
         offset += 4 + length
@@ -77,29 +85,34 @@ def data_sequence_numbers(payload: bytes) -> list[tuple[bytes, int]]:
     return found
 
 
-def classify(payload: bytes, feedback: set[bytes], status: set[bytes]) -> str:
-    """The category of one RTPS datagram (``payload`` from the UDP payload on)."""
+def classify(payload: bytes, feedback: set[bytes], status: set[bytes]) -> tuple[str, int]:
+    """The category of one RTPS datagram (``payload`` from the UDP payload on), and the samples
+    of that category's writers that start in it (feedback data and status only)."""
     if payload[:4] != b'RTPS':
-        return 'other'
+        return 'other', 0
     prefix = payload[8:20]
     submessages = _writer_ids(payload)
-    writers = {prefix + entity for _, entity in submessages}
+    writers = {prefix + entity for _, entity, _ in submessages}
+
+    def samples(of: set[bytes]) -> int:
+        return sum(starts and prefix + entity in of for _, entity, starts in submessages)
+
     if any(kind in (_DATA, _DATA_FRAG) and prefix + entity in feedback
-           for kind, entity in submessages):
-        return 'feedback data'
+           for kind, entity, _ in submessages):
+        return 'feedback data', samples(feedback)
     if writers & feedback:
-        return 'feedback gap/heartbeat'
+        return 'feedback gap/heartbeat', 0
     if writers & status:
-        return 'status'
+        return 'status', samples(status)
     # Builtin endpoints have entity kinds with the two top bits set.
-    if any(entity[3] & 0xc0 == 0xc0 for _, entity in submessages):
-        return 'discovery'
-    return 'other'
+    if any(entity[3] & 0xc0 == 0xc0 for _, entity, _ in submessages):
+        return 'discovery', 0
+    return 'other', 0
 
 
 def capture(interface: str, feedback: set[bytes], status: set[bytes],
-            stop: threading.Event) -> dict[str, dict[str, int]]:
-    """Count received frames on ``interface`` by category until ``stop`` is set."""
+            stop: threading.Event) -> dict[str, dict[str, Any]]:
+    """Count received frames, and samples, on ``interface`` by category until ``stop`` is set."""
     sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(3))  # ETH_P_ALL
     sock.bind((interface, 0))
     sock.settimeout(0.2)
@@ -109,6 +122,8 @@ def capture(interface: str, feedback: set[bytes], status: set[bytes],
     first_fragment: dict[tuple[bytes, int], tuple[str, bool]] = {}
     received: set[tuple[bytes, int]] = set()  # (feedback writer GUID, sequence number)
     resent = Counter[str]()
+    samples: Counter[str] = Counter()
+    status_datagrams: list[int] = []
     print('SNIFFING', flush=True)
     while not stop.is_set():
         try:
@@ -117,7 +132,7 @@ def capture(interface: str, feedback: set[bytes], status: set[bytes],
             continue
         if address[2] == socket.PACKET_OUTGOING:
             continue
-        category, again = 'other', False
+        category, again, started = 'other', False, 0
         if frame[12:14] == b'\x08\x00' and frame[23] == 17:  # IPv4, UDP
             header = (frame[14] & 0x0f) * 4
             ident, fragment = struct.unpack('!HH', frame[18:22])
@@ -126,11 +141,14 @@ def capture(interface: str, feedback: set[bytes], status: set[bytes],
                 category, again = first_fragment.get(key, ('other', False))
             else:
                 payload = frame[14 + header + 8:]
-                category = classify(payload, feedback, status)
+                category, started = classify(payload, feedback, status)
                 if category == 'feedback data':
                     numbers = [n for n in data_sequence_numbers(payload) if n[0] in feedback]
                     again = bool(numbers) and all(n in received for n in numbers)
                     received.update(numbers)
+                if category == 'status' and started:
+                    status_datagrams.append(struct.unpack('!H', frame[14 + header + 4:
+                                                                        14 + header + 6])[0])
                 if fragment & 0x2000:  # more fragments follow
                     first_fragment[key] = (category, again)
         frames[category] += 1
@@ -138,9 +156,11 @@ def capture(interface: str, feedback: set[bytes], status: set[bytes],
         if again:
             resent['bytes'] += len(frame)
             resent['packets'] += 1
-    counts: dict[str, dict[str, int]] = {c: {'bytes': octets[c], 'packets': frames[c]}
-                                         for c in CATEGORIES}
+        samples[category] += started
+    counts: dict[str, dict[str, Any]] = {
+        c: {'bytes': octets[c], 'packets': frames[c], 'samples': samples[c]} for c in CATEGORIES}
     counts['feedback data'].update(resent_bytes=resent['bytes'], resent_packets=resent['packets'])
+    counts['status']['datagrams'] = status_datagrams
     return counts
 
 

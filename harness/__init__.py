@@ -11,9 +11,9 @@ every child process by :class:`harness.proc.Proc`. It imports ``cft_action`` and
 - ``client``: the load client process (plain rclpy, ``cft_action`` modes, upstream-equivalent),
   ``upstream``: the emulation of the upstream (Rolling) design;
 - ``load``: starts the server and the load clients, runs a load phase and accounts it (``make
-  demo``, ``make bench``); ``netns``: one network namespace per client, so that bytes on the wire
-  can be counted; ``plot``: the plots; ``load.CapturingRun`` adds a packet capture
-  (``benchmarks._capture``) on one client per phase;
+  demo``, ``make bench``), and with ``CapturingRun`` captures one client's packets
+  (``benchmarks/_capture.py``, run as a child process); ``netns``: one network namespace per
+  client, so that bytes on the wire can be counted; ``plot``: the plots;
 - ``crash``: a server that may crash: its environment, its exit and its core; ``hazard``: one cell
   of the hazard matrix (``benchmarks/hazard.py``, the guard's tests);
 - ``cli``: command-line value types (comma-separated lists);

@@ -1,17 +1,20 @@
 """A load client process: one action client that sends goals on command and accounts what arrives.
 
-Usage: ``python -m harness.client ACTION CONFIG GOALS ORDER DEPTH``
+Usage: ``python -m harness.client ACTION CONFIG GOALS ORDER DEPTH [INTERVAL_S]``
 
 CONFIG is ``rclpy`` (plain :class:`rclpy.action.ActionClient`), ``client`` or ``goals``
 (:class:`cft_action.ActionClient` in that mode), or ``upstream`` (the emulation of the upstream
-design in :mod:`harness.upstream`). Every queue is DEPTH deep.
+design in :mod:`harness.upstream`). Every queue is DEPTH deep. With INTERVAL_S > 0 the goals of
+``go`` are sent one every INTERVAL_S seconds instead of all at once (goals that arrive over time,
+for the status topic's benchmark).
 
 Before ``READY`` the client completes one goal of order 0 (no feedback): ``wait_for_server`` only
 sees the server in the graph, while this round trip proves that the endpoints matched.
 
 Commands on stdin, one per line:
 
-- ``go``: send GOALS goals of ORDER feedback messages each, with a feedback callback each.
+- ``go``: send GOALS goals of ORDER feedback messages each, with a feedback callback each (at once,
+  or one every INTERVAL_S).
 - ``progress``: reply ``PROGRESS <json>`` with the counters so far.
 - ``report``: reply ``RESULT <json>`` with everything measured since ``go``.
 - ``quit`` (or end of input): exit.
@@ -24,6 +27,10 @@ What it counts, from ``go`` on:
 - ``callbacks``: feedback that reached a user callback, with ``latency_us`` from the server's
   publish time in the message to the callback.
 - ``cpu_s``: user + system seconds of this process, all threads.
+- ``status``, ``status_entries``, ``status_max_entries`` and ``status_cdr_bytes``: status messages
+  (``GoalStatusArray``) taken from rcl, the goal entries they listed, the most in one, and their
+  serialized size (:func:`status_array_size`; no headers). The status reader keeps the last sample
+  only (rclpy's default QoS), so a client that falls behind takes fewer than the wire brought.
 - ``updates``: filter changes (``client``/``goals``: ``feedback_filter_state.updates``;
   ``upstream``: every ``set_content_filter`` call, with ``recreations`` of the DataReader).
 
@@ -58,19 +65,38 @@ PROBE_RESEND_S = 2.0
 _TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
                        GoalStatus.STATUS_ABORTED})
 
+#: CDR bytes of an ``action_msgs/GoalStatusArray``: the 4-byte encapsulation header and the 4-byte
+#: sequence length, then per goal a 16-byte UUID, an 8-byte stamp and a 1-byte status, padded to 28
+#: bytes but for the last (checked against ``serialize_message`` in tests/test_status_size.py).
+STATUS_ARRAY_HEADER = 8
+STATUS_ENTRY = 28
+_STATUS_LAST_PADDING = 3
+
+#: The status counters of :class:`CountingMixin`, as :meth:`LoadClient.report` gives them.
+STATUS_COUNTERS = ('status', 'status_entries', 'status_cdr_bytes')
+
+
+def status_array_size(entries: int) -> int:
+    """Serialized (CDR) size of a ``GoalStatusArray`` listing ``entries`` goals."""
+    if entries == 0:
+        return STATUS_ARRAY_HEADER
+    return STATUS_ARRAY_HEADER + STATUS_ENTRY * entries - _STATUS_LAST_PADDING
+
 
 class CountingMixin:
-    """Counts feedback taken from rcl, own and foreign, in ``take_data``."""
+    """Counts feedback taken from rcl, own and foreign, and status messages, in ``take_data``."""
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
         """Set up the counters, then construct the action client with all arguments."""
         self.own_uuids: set[bytes] = set()
         self.own_taken = 0
         self.foreign_taken = 0
+        self.status_counts = dict.fromkeys(STATUS_COUNTERS, 0)
+        self.status_max_entries = 0
         super().__init__(*args, **kwargs)
 
     def take_data(self) -> dict:
-        """Take as the base class does, and count the feedback message if one was taken."""
+        """Take as the base class does, and count the feedback or status message taken."""
         data = super().take_data()
         feedback = data.get('feedback')
         if feedback is not None:
@@ -78,6 +104,13 @@ class CountingMixin:
                 self.own_taken += 1
             else:
                 self.foreign_taken += 1
+        status = data.get('status')
+        if status is not None:
+            entries = len(status.status_list)
+            self.status_counts['status'] += 1
+            self.status_counts['status_entries'] += entries
+            self.status_counts['status_cdr_bytes'] += status_array_size(entries)
+            self.status_max_entries = max(self.status_max_entries, entries)
         return data
 
 
@@ -121,11 +154,15 @@ def cpu_seconds() -> float:
 class LoadClient:
     """Sends the goals and keeps the counters; everything runs in the executor's thread."""
 
-    def __init__(self, node: Node, client: Any, goals: int, order: int) -> None:
+    def __init__(self, node: Node, client: Any, goals: int, order: int,
+                 interval_s: float = 0.0) -> None:
         self.node = node
         self.client = client
         self.goals = goals
         self.order = order
+        self.interval_s = interval_s
+        self.sent = 0
+        self.timer: Any = None
         self.handles: list[Any] = []  # strong references: rclpy tracks status through weakrefs
         self.rejected = 0
         self.callbacks = 0
@@ -133,6 +170,7 @@ class LoadClient:
         self.latency_us: list[int] = []
         self.start_cpu = 0.0
         self.start_counters: dict[str, Any] = {}
+        self.start_status: dict[str, int] = {}
         self.started = 0.0
 
     def on_feedback_for(self, goal_uuid: bytes) -> Callable[[Any], None]:
@@ -147,19 +185,37 @@ class LoadClient:
         return on_feedback
 
     def go(self, executor: SingleThreadedExecutor) -> None:
-        """Send all goals, spinning in between so that responses do not pile up."""
+        """Send all goals, spinning in between so that responses do not pile up.
+
+        With an interval, send the first now and the others from a timer, one per interval.
+        """
         self.start_cpu = cpu_seconds()
         self.start_counters = filter_counters(self.client)
+        self.start_status = dict(self.client.status_counts)
+        self.client.status_max_entries = 0
         self.started = time.monotonic()
+        if self.interval_s > 0:
+            self.send_one()
+            self.timer = self.node.create_timer(self.interval_s, self.send_one)
+            return
         for _ in range(self.goals):
-            new_uuid = getattr(self.client, 'new_goal_uuid', None)
-            goal_uuid = new_uuid() if new_uuid else UUID(uuid=list(uuid.uuid4().bytes))
-            key = bytes(goal_uuid.uuid)
-            self.client.own_uuids.add(key)
-            future = self.client.send_goal_async(
-                Fibonacci.Goal(order=self.order), self.on_feedback_for(key), goal_uuid=goal_uuid)
-            future.add_done_callback(self._on_goal_response)
+            self.send_one()
             executor.spin_once(timeout_sec=0)
+
+    def send_one(self) -> None:
+        """Send the next goal, with its feedback callback; stop the timer after the last."""
+        if self.sent >= self.goals:
+            if self.timer is not None:
+                self.timer.cancel()
+            return
+        self.sent += 1
+        new_uuid = getattr(self.client, 'new_goal_uuid', None)
+        goal_uuid = new_uuid() if new_uuid else UUID(uuid=list(uuid.uuid4().bytes))
+        key = bytes(goal_uuid.uuid)
+        self.client.own_uuids.add(key)
+        future = self.client.send_goal_async(
+            Fibonacci.Goal(order=self.order), self.on_feedback_for(key), goal_uuid=goal_uuid)
+        future.add_done_callback(self._on_goal_response)
 
     def _on_goal_response(self, future: Any) -> None:
         handle = future.result()
@@ -174,8 +230,9 @@ class LoadClient:
 
     def progress(self) -> dict[str, Any]:
         """The counters that tell the orchestrator whether data is still arriving."""
+        status = {k: v - self.start_status.get(k, 0) for k, v in self.client.status_counts.items()}
         return {'own': self.client.own_taken, 'foreign': self.client.foreign_taken,
-                'callbacks': self.callbacks, 'goals_done': self.goals_done()}
+                'callbacks': self.callbacks, 'goals_done': self.goals_done(), **status}
 
     def report(self) -> dict[str, Any]:
         """Everything measured since ``go``."""
@@ -186,6 +243,7 @@ class LoadClient:
         return {**self.progress(), 'goals': self.goals, 'order': self.order,
                 'accepted': len(self.handles), 'rejected': self.rejected,
                 'misrouted': self.misrouted, 'cpu_s': cpu_seconds() - self.start_cpu,
+                'status_max_entries': self.client.status_max_entries,
                 'latency_us': self.latency_us, **counters}
 
 
@@ -225,6 +283,7 @@ def main() -> None:
     """Run one load client until ``quit``."""
     action, config = sys.argv[1], sys.argv[2]
     goals, order, depth = int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
+    interval_s = float(sys.argv[6]) if len(sys.argv) > 6 else 0.0
     rclpy.init()
     node = Node(f'cft_load_client_{uuid.uuid4().hex[:8]}')
     executor = SingleThreadedExecutor()
@@ -234,7 +293,7 @@ def main() -> None:
     if not probe(node, executor, client, timeout=60):
         print('NO SERVER', flush=True)
         return
-    load = LoadClient(node, client, goals, order)
+    load = LoadClient(node, client, goals, order, interval_s)
     commands: queue.Queue[str] = queue.Queue()
     # A command wakes the executor through a guard condition, so the client sleeps while nothing
     # arrives: polling stdin between short spins cost 40 idle clients most of a core, which

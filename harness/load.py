@@ -21,8 +21,9 @@ A spec may add *bystanders* (:attr:`LoadSpec.bystanders`): plain rclpy clients t
 phase's clients in every phase, with the same goals, and are accounted apart (a dashboard that
 receives every goal's feedback). A phase may also run fewer clients than the run's spec
 (``run_phase(config, clients=K)``), so that one server serves phases of several sizes.
-:class:`CapturingRun` adds a packet capture (``benchmarks._capture``) on the first client process
-of every phase, the first bystander when there are any.
+:class:`CapturingRun` breaks the first client process's received bytes down by kind, with a packet
+capture (``benchmarks/_capture.py``, run as a child process in that client's namespace); the first
+client process is the first bystander when there are any.
 """
 
 from __future__ import annotations
@@ -52,9 +53,10 @@ CONFIG_LABELS = {
 #: goals' terms (an update that belongs to the phase).
 SETTLE_S = FINISHED_GOAL_GRACE + 2.5
 
-#: Seconds a finished goal stays on the server. Every status message lists all goals the server
-#: keeps, and goes to every client: with rclpy's default of 900 s each phase of a run would carry
-#: the goals of all earlier phases, and later configurations would receive more status bytes.
+#: Seconds a finished goal stays on the server, unless a spec says otherwise. Every status message
+#: lists all goals the server keeps, and goes to every client: with rclpy's default of 900 s each
+#: phase of a run would carry the goals of all earlier phases, and later configurations would
+#: receive more status bytes.
 #: The load clients never ask for results, so nothing else depends on it.
 RESULT_TIMEOUT_S = 2
 
@@ -80,7 +82,8 @@ class LoadSpec:
     :ivar network: ``'auto'`` (namespaces when possible), ``'netns'`` or ``'count'``.
     :ivar drain_timeout: seconds a phase may take after its goals finished, for slow clients.
     :ivar goals_timeout: seconds the goals of a phase may take; None: 120 + 30 x their nominal
-        duration (a saturated machine runs them several times slower).
+        duration (a saturated machine runs them several times slower), plus the time their
+        sending takes with ``goal_interval_s``.
     :ivar settle_s: seconds of quiet after the last goal before a phase is accounted (see
         :data:`SETTLE_S`).
     :ivar server_env: extra environment of the server process (e.g. the guard's settings).
@@ -88,6 +91,10 @@ class LoadSpec:
         phase's N clients, with M goals each like them; they receive every goal's feedback. They
         are reported apart (``phase['bystanders']``, ``phase['bystander_summary']``) and are not
         part of the phase's per-client figures.
+    :ivar result_timeout_s: seconds the server keeps a finished goal (and lists it in every status
+        message); see :data:`RESULT_TIMEOUT_S`.
+    :ivar goal_interval_s: 0: each client sends its goals at once on ``go``; else one every this
+        many seconds.
     """
 
     clients: int = 8
@@ -101,6 +108,8 @@ class LoadSpec:
     settle_s: float = SETTLE_S
     server_env: dict[str, str] = dataclasses.field(default_factory=dict)
     bystanders: int = 0
+    result_timeout_s: int = RESULT_TIMEOUT_S
+    goal_interval_s: float = 0.0
 
     @property
     def total_goals(self) -> int:
@@ -172,7 +181,7 @@ class LoadRun:
                                  f'({feedback_size(spec.pad)} B), no headers, status or discovery: '
                                  f'no network namespaces ({reason})')
         argv = python_module('harness.server', self.action, 1.0 / spec.rate_hz, '--pad', spec.pad,
-                             '--depth', self.depth, '--result-timeout', RESULT_TIMEOUT_S)
+                             '--depth', self.depth, '--result-timeout', spec.result_timeout_s)
         if self.topology:
             argv = self.topology.command(self.topology.server, argv)
         self.server = Proc('server', argv, guard.environment({**self.env, **spec.server_env}))
@@ -209,7 +218,7 @@ class LoadRun:
         clients = []
         for role, name in roles:
             argv = python_module('harness.client', self.action, role, spec.goals, spec.order,
-                                 self.depth)
+                                 self.depth, spec.goal_interval_s)
             if self.topology:
                 argv = self.topology.command(self.topology.add_client(), argv)
             clients.append(Proc(name, argv, self.env))
@@ -224,7 +233,8 @@ class LoadRun:
         """Wait until the server accepted and finished every goal of the phase."""
         spec = self.spec
         expected = spec.all_goals * spec.order
-        timeout = spec.goals_timeout or 120 + 30 * spec.order / spec.rate_hz
+        timeout = spec.goals_timeout or (120 + 30 * spec.order / spec.rate_hz
+                                         + spec.goals * spec.goal_interval_s)
         deadline = time.monotonic() + timeout
         shown = 0.0
         while True:
@@ -359,15 +369,17 @@ class LoadRun:
 
 
 class CapturingRun(LoadRun):
-    """A load run that captures the traffic of the first client process of every phase.
+    """A load run that captures the first client process's received frames in every phase.
 
-    The capture (``benchmarks._capture``) runs in that client's network namespace and sorts its
-    received frames by kind; the phase gets it as ``phase['anatomy']``. The first client process
-    is the first bystander when the spec has any, else the first of the phase's clients.
+    ``benchmarks/_capture.py`` runs in that client's namespace from :meth:`window_started` to
+    :meth:`window_ended`, and the phase gets its ``anatomy``: bytes, packets and samples by kind
+    (feedback data, feedback gap/heartbeat, status, discovery, other). The first client process is
+    the first bystander when the spec has any, else the first of the phase's clients. Capturing
+    costs CPU on the machine being measured, so a run with it is a run of its own.
     """
 
     def window_started(self, clients: list[Proc], server_stats: dict[str, Any]) -> None:
-        """Start the capture once the clients are ready, before ``go``."""
+        """Start the capture on the first client's interface, before ``go``, once it listens."""
         if not self.topology:
             raise RuntimeError('a packet capture needs network namespaces (root and iproute2)')
         writers = server_stats['writers']
@@ -378,7 +390,7 @@ class CapturingRun(LoadRun):
         self._capture.expect('SNIFFING', 30)
 
     def window_ended(self, clients: list[Proc]) -> dict[str, Any]:
-        """Stop the capture; its counts by category are the phase's ``anatomy``."""
+        """Stop the capture; its counts by kind are the phase's ``anatomy``."""
         anatomy = self._capture.request_json('stop', 'RESULT', timeout=30)
         self._capture.stop()
         return {'anatomy': anatomy}
@@ -428,6 +440,11 @@ def client_figures(clients: list[dict[str, Any]], spec: LoadSpec,
         'latency_p90_ms': _ms(percentile(latencies, 0.90)),
         'latency_p99_ms': _ms(percentile(latencies, 0.99)),
         'latency_max_ms': _ms(max(latencies) if latencies else None),
+        # Status messages taken from rcl (not those the keep-last-1 reader dropped unread).
+        'status_per_client': _mean([c.get('status', 0) for c in clients]),
+        'status_entries_per_client': _mean([c.get('status_entries', 0) for c in clients]),
+        'status_cdr_bytes_per_client': _mean([c.get('status_cdr_bytes', 0) for c in clients]),
+        'status_max_entries': max((c.get('status_max_entries', 0) for c in clients), default=0),
     }
 
 
@@ -493,6 +510,23 @@ def run_load(spec: LoadSpec, configs: Sequence[str], progress: Progress = print,
     return {'spec': dataclasses.asdict(spec), 'queue_depth': run.depth,
             'bytes_method': run.bytes_method, 'network_note': run.network_note,
             'domain_id': run.env['ROS_DOMAIN_ID'], 'phases': phases}
+
+
+def int_list(text: str) -> list[int]:
+    """``'1,4,16'`` as ``[1, 4, 16]``: a command line's list of counts (an argparse type)."""
+    return [int(v) for v in text.split(',') if v.strip()]
+
+
+def config_list(text: str) -> list[str]:
+    """Comma-separated configuration names, checked against :data:`CONFIG_LABELS` (an argparse
+    type)."""
+    import argparse
+    names = [c.strip() for c in text.split(',') if c.strip()]
+    unknown = sorted(set(names) - set(CONFIG_LABELS))
+    if unknown:
+        raise argparse.ArgumentTypeError(f'unknown configurations {", ".join(unknown)}; '
+                                         f'known: {", ".join(CONFIG_LABELS)}')
+    return names
 
 
 def environment_facts() -> dict[str, Any]:

@@ -19,6 +19,21 @@ def pyplot() -> Any:
     return plt
 
 
+def finish_axes(ax: Any, xlabel: str, ylabel: str, title: str, xbase: int = 10,
+                ylog: bool = True) -> None:
+    """Label a panel with logarithmic axes (x in ``xbase``; y unless ``ylog`` is False), a grid
+    and a legend."""
+    ax.set_xscale('log', base=xbase)
+    if ylog:
+        ax.set_yscale('log')
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which='both', alpha=0.3)
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(fontsize=7)
+
+
 def demo_figure(result: dict[str, Any], path: Path) -> Path:
     """Write the one-load-point comparison of the demo to ``path`` (PNG); return the path."""
     plt = pyplot()

@@ -34,8 +34,8 @@ goal responses sent, and sends that failed: rclpy logs those and drops the goal)
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
 line), ``guard_calls``, ``guard_filter`` and ``guard_writers`` (its call, filter-verdict and
-writer-limit counters) and ``writers`` (the GUIDs of the feedback and status writers, in hex). ``GOALS <json>`` replies to the command ``goals``: the feedback messages published
-per goal so far, by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). End
+writer-limit counters) and ``writers`` (the GUIDs of the feedback and status writers, in hex).
+``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far, by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). End
 of input stops the server.
 """
 
