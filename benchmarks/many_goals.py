@@ -3,7 +3,7 @@
 
 Usage: ``python -m benchmarks.many_goals [--goals 10000] [--order 4] [--period 2.0]
 [--configs client,rclpy] [--depth N] [--server-executor single|multi] [--stall-s 90]
-[--timeout 1800] [--out FILE] [--plot FILE]``
+[--timeout 1800] [--profile S] [--out FILE] [--plot FILE]``
 
 Issue 14, item 4. For each configuration in turn (``client``: :class:`cft_action.ActionClient` in
 its default mode; ``rclpy``: plain :class:`rclpy.action.ActionClient`), and each goal count of
@@ -28,7 +28,10 @@ RSS and CPU sampled from ``/proc`` every 0.5 s, for the plot), the filter's upda
 (``process_reader_filter_info`` calls), and the times: all goals sent, last goal response, all goals
 accepted at the server, all goals done, last feedback callback. A phase that stops making progress
 for ``--stall-s`` seconds gets the threads of both processes from gdb, then the server is told to
-release the goals it holds, and the phase is accounted as far as it got.
+release the goals it holds, and the phase is accounted as far as it got. With ``--profile S`` and
+py-spy installed, both processes are sampled for S seconds (Python and native frames; py-spy
+stops a process briefly for each of 50 samples a second, and the times include it) once half the
+goals were accepted, and once the goals were released: where the time goes.
 
 Every process has ``ROS_DOMAIN_ID`` ``--domain`` (103) and localhost-only discovery; every wait is
 bounded and every process is stopped. Results go to
@@ -43,6 +46,7 @@ import json
 import os
 import platform
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
@@ -50,7 +54,7 @@ from typing import Any, Optional, Sequence
 from benchmarks.differential import guard_command
 from harness import load
 from harness.crash import live_backtrace, machine_line, plain_env
-from harness.procstat import Sampler
+from harness.procstat import Sampler, profile
 from harness.proc import Proc, ROOT, python_module
 
 #: Labels of the configurations, in the order of the table's columns.
@@ -58,6 +62,19 @@ LABELS = {'client': 'cft_action (client mode)', 'rclpy': 'plain rclpy'}
 
 #: Seconds between polls of the server's counters while the goals run.
 POLL_S = 1.0
+
+#: Frames whose share of the profile's samples the profile table shows (substrings of py-spy's
+#: frames): where the work that grows with the number of live goals goes.
+WATCH = {
+    'goal_status_array__convert_to_py': 'GoalStatusArray converted to Python (take_status)',
+    'Future._set_executor': "every future of the waitable, at each wake (_take_waitable)",
+    'rclpy/executors.py:58': 'executor scans its tasks, every spin (executors.py:580-589)',
+    'rcl_action_get_goal_status_array': 'status array built (publish_status)',
+    'rcl_action_publish_status': 'status array published',
+    'rcl_action_server_goal_exists': 'goal id looked up among all goals',
+    'publish_feedback': 'feedback published',
+    'rcl_wait': 'waiting (rcl_wait)',
+}
 
 
 def say(*words: object) -> None:
@@ -90,6 +107,7 @@ class Phase:
         self.env = plain_env(opts.domain)
         self.notes: list[str] = []
         self.backtraces: dict[str, Optional[str]] = {}
+        self.profiles: dict[str, Any] = {}
 
     def run(self) -> dict[str, Any]:
         """Run the phase and return its raw figures; the processes are stopped however it ends."""
@@ -143,7 +161,7 @@ class Phase:
             'server_cpu_lifetime_s': server.cpu_lifetime_s,
             'samples': {name: sampler.series(name) for name in ('server', 'client')}
             if sampler else {},
-            'notes': self.notes, 'backtraces': self.backtraces,
+            'notes': self.notes, 'backtraces': self.backtraces, 'profiles': self.profiles,
         }
 
     def _wait_for_goals(self, server: Proc, client: Proc, base: dict[str, Any], go: float,
@@ -164,6 +182,11 @@ class Phase:
             if times['accepted_s'] is None and held >= self.goals:
                 times['accepted_s'] = now - go
             released = stats['released'] is not None
+            if opts.profile > 0:
+                if held >= self.goals // 2 and 'accepting' not in self.profiles:
+                    self._profile('accepting', now - go, held, server, client, label)
+                if released and 'released' not in self.profiles:
+                    self._profile('released', now - go, held, server, client, label)
             if released and stats['active'] == 0 and held > 0:
                 times['done_s'] = now - go
                 return times
@@ -194,6 +217,24 @@ class Phase:
                 times['done_s'] = now - go
                 return times
             time.sleep(POLL_S)
+
+
+    def _profile(self, moment: str, at: float, held: int, server: Proc, client: Proc,
+                 label: str) -> None:
+        """Sample both processes at once for ``--profile`` seconds (py-spy)."""
+        say(f'{label} profiling both processes for {self.opts.profile:g} s ({moment})')
+        found: dict[str, Any] = {'at_s': at, 'accepted': held}
+
+        def one(name: str, pid: int) -> None:
+            found[name] = profile(pid, self.opts.profile, watch=list(WATCH))
+
+        threads = [threading.Thread(target=one, args=(name, proc.pid))
+                   for name, proc in (('server', server), ('client', client))]
+        for thread in threads:
+            thread.start()
+        for thread in threads:
+            thread.join(self.opts.profile + 90)
+        self.profiles[moment] = found
 
 
 def _without_latency(report: dict[str, Any]) -> dict[str, Any]:
@@ -345,6 +386,25 @@ def markdown_table(summaries: Sequence[dict[str, Any]]) -> str:
     return '\n\n'.join(out)
 
 
+def profile_table(phases: Sequence[dict[str, Any]]) -> str:
+    """Shares of the py-spy samples in :data:`WATCH`'s frames, per process, phase and moment."""
+    columns = []
+    for phase in phases:
+        for moment, found in phase.get('profiles', {}).items():
+            for name in ('client', 'server'):
+                if found.get(name):
+                    columns.append((f'{name}, {phase["config"]} x {phase["goals"]}, {moment} '
+                                    f'({found["accepted"]} accepted)', found[name]))
+    if not columns:
+        return ''
+    lines = ['| share of samples | ' + ' | '.join(c for c, _ in columns) + ' |',
+             '|' + '---|' * (len(columns) + 1)]
+    for needle, label in WATCH.items():
+        lines.append(f'| {label} | ' + ' | '.join(
+            f'{found["watched"].get(needle, 0):.0%}' for _, found in columns) + ' |')
+    return '\n'.join(lines)
+
+
 def plot(phases: Sequence[dict[str, Any]], path: Path) -> Optional[Path]:
     """RSS and CPU over time of both processes, per phase of the largest goal count."""
     from harness.plot import pyplot
@@ -395,6 +455,9 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                         help='seconds without progress that count as a stall')
     parser.add_argument('--timeout', type=float, default=1800.0,
                         help='seconds a phase\'s goals may take, and its drain')
+    parser.add_argument('--profile', type=float, default=0.0,
+                        help='seconds of py-spy sampling of both processes at half acceptance and '
+                             'at the release (0: none)')
     parser.add_argument('--domain', type=int, default=103)
     parser.add_argument('--out', type=Path)
     parser.add_argument('--plot', type=Path)
@@ -427,13 +490,15 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 f'{s["server_maxrss_mb"]:.0f} MB; load {os.getloadavg()[0]:.2f}')
     load_averages['end'] = os.getloadavg()
     table = markdown_table(summaries)
-    say('\n' + table)
+    profiles = profile_table(phases)
+    say('\n' + table + ('\n\n' + profiles if profiles else ''))
     result = {
         'date': now.isoformat(), 'host': platform.node(), 'machine': load.environment_facts(),
         'command': ' '.join([os.path.basename(sys.executable), '-m', 'benchmarks.many_goals',
                              *(argv if argv is not None else sys.argv[1:])]),
         'args': {k: str(v) if isinstance(v, Path) else v for k, v in vars(opts).items()},
         'load_average': load_averages, 'summaries': summaries, 'table': table,
+        'profile_table': profiles,
         'phases': phases,
     }
     out.parent.mkdir(parents=True, exist_ok=True)

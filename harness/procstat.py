@@ -11,7 +11,7 @@ from __future__ import annotations
 import os
 import threading
 import time
-from typing import Optional
+from typing import Any, Optional, Sequence
 
 #: Clock ticks per second, the unit of utime and stime in /proc/PID/stat.
 _TICKS = os.sysconf('SC_CLK_TCK')
@@ -76,3 +76,61 @@ class Sampler:
     def series(self, name: str) -> list[tuple[float, Optional[int], Optional[float]]]:
         """``(t, rss kB, cpu s)`` of ``name``, in order."""
         return [(t, rss, cpu) for t, n, rss, cpu in self.samples if n == name]
+
+
+def py_spy() -> Optional[str]:
+    """The py-spy executable beside this interpreter or on PATH, or None (it is optional)."""
+    import shutil
+    import sys
+    beside = os.path.join(os.path.dirname(sys.executable), 'py-spy')
+    return beside if os.access(beside, os.X_OK) else shutil.which('py-spy')
+
+
+def profile(pid: int, seconds: float, rate: int = 50, top: int = 25,
+            watch: Sequence[str] = ()) -> Optional[dict[str, Any]]:
+    """Where ``pid`` spends its time, by py-spy, with native frames (C, C++) below Python's.
+
+    py-spy stops the process for each sample (native stacks need it), ``rate`` times a second.
+
+    Returns ``{'samples': n, 'self': [[share, frame], ...], 'inclusive': [...]}``, the ``top``
+    frames by the share of samples in which they are the innermost frame, and in which they appear
+    at all; idle threads (blocked in ``read``, ``sleep``, ``wait``) count as samples too. With
+    ``watch``, also ``'watched'``: for each substring, the share of samples with a frame that
+    contains it. None when py-spy is not installed or failed.
+    """
+    import collections
+    import subprocess
+    import tempfile
+    spy = py_spy()
+    if spy is None:
+        return None
+    with tempfile.NamedTemporaryFile('r', suffix='.txt') as out:
+        try:
+            subprocess.run([spy, 'record', '-p', str(pid), '-d', str(max(1, round(seconds))),
+                            '-r', str(rate), '--native', '-f', 'raw',
+                            '-o', out.name], capture_output=True, timeout=seconds + 60,
+                           stdin=subprocess.DEVNULL)
+        except subprocess.TimeoutExpired:
+            return None
+        own: collections.Counter[str] = collections.Counter()
+        watched: collections.Counter[str] = collections.Counter()
+        inclusive: collections.Counter[str] = collections.Counter()
+        total = 0
+        for line in out:
+            stack, _, count = line.rstrip('\n').rpartition(' ')
+            if not stack or not count.isdigit():
+                continue
+            frames = stack.split(';')
+            total += int(count)
+            own[frames[-1]] += int(count)
+            for frame in set(frames):
+                inclusive[frame] += int(count)
+            for needle in watch:
+                if needle in stack:
+                    watched[needle] += int(count)
+    if not total:
+        return None
+    return {'samples': total,
+            'self': [[round(n / total, 4), f] for f, n in own.most_common(top)],
+            'inclusive': [[round(n / total, 4), f] for f, n in inclusive.most_common(top)],
+            'watched': {needle: round(watched[needle] / total, 4) for needle in watch}}
