@@ -159,7 +159,8 @@ class Phase:
             'delivery': delivery(delivered, published, opts.order),
             'client_cpu_lifetime_s': client.cpu_lifetime_s if client else None,
             'server_cpu_lifetime_s': server.cpu_lifetime_s,
-            'samples': {name: sampler.series(name) for name in ('server', 'client')}
+            'samples': {name: [(round(t, 2), rss, cpu) for t, rss, cpu in sampler.series(name)]
+                        for name in ('server', 'client')}
             if sampler else {},
             'notes': self.notes, 'backtraces': self.backtraces, 'profiles': self.profiles,
         }
@@ -482,6 +483,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             phase['load_average_after'] = os.getloadavg()
             phases.append(phase)
             summaries.append(summarize(phase))
+            phase['report'] = _without_latency(phase['report'])  # the summary has percentiles
             s = summaries[-1]
             say(f'[{config} x {goals}] delivered {s["delivered"]}/{s["published"]}, '
                 f'{s["goals_complete"]}/{goals} goals complete, foreign {s["foreign"]}, '
