@@ -3,7 +3,8 @@
 
 Usage: ``python -m benchmarks.many_goals [--goals 10000] [--order 4] [--period 2.0]
 [--configs client,rclpy] [--depth N] [--server-executor single|multi] [--stall-s 90]
-[--timeout 1800] [--profile S] [--out FILE] [--plot FILE]``
+[--timeout 1800] [--profile S] [--out FILE] [--plot FILE]``, or ``--markdown JSON...`` to print
+the tables of saved results again.
 
 Issue 14, item 4. For each configuration in turn (``client``: :class:`cft_action.ActionClient` in
 its default mode; ``rclpy``: plain :class:`rclpy.action.ActionClient`), and each goal count of
@@ -462,12 +463,23 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--domain', type=int, default=103)
     parser.add_argument('--out', type=Path)
     parser.add_argument('--plot', type=Path)
+    parser.add_argument('--markdown', type=Path, nargs='+',
+                        help='print the tables of these result files; run nothing')
     return parser.parse_args(argv)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run every goal count and configuration; write the JSON, the table and the plot."""
     opts = parse_args(argv)
+    if opts.markdown:
+        for path in opts.markdown:
+            saved = json.loads(path.read_text())
+            say(f'{path}: {saved["command"]} ({saved["date"]}, load average '
+                f'{saved["load_average"]["start"][0]:.2f} at start)\n')
+            say(markdown_table(saved['summaries']))
+            if saved.get('profile_table'):
+                say('\n' + saved['profile_table'])
+        return 0
     counts = [int(n) for n in opts.goals.split(',')]
     configs = opts.configs.split(',')
     now = datetime.datetime.now(datetime.timezone.utc)
