@@ -343,6 +343,7 @@ ROWS: tuple[tuple[str, str, str], ...] = (
     ('all goals done (server), s', 'done_s', '.1f'),
     ('last feedback callback, s', 'last_callback_s', '.1f'),
     ('feedback latency p50 / p99 ms', 'latency', ''),
+    ('load average (1 min) before / after', 'load', ''),
 )
 
 #: Rows that get a ratio cft / plain.
@@ -357,6 +358,8 @@ def _cell(s: dict[str, Any], key: str, fmt: str) -> str:
         return f'{s["guard_filter_events_window"]} / {s["guard_filter_events_total"]}'
     if key == 'compiled':
         return f'{s["guard_compiled_window"]} / {s["guard_compiled_total"]}'
+    if key == 'load':
+        return f'{s["load_before"]:.2f} / {s["load_after"]:.2f}' if 'load_before' in s else '-'
     if key == 'latency':
         return f'{_num(s["latency_p50_ms"], ".0f")} / {_num(s["latency_p99_ms"], ".0f")}'
     return _num(s.get(key), fmt)
@@ -491,10 +494,13 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     load_averages = {'start': os.getloadavg()}
     for goals in counts:
         for config in configs:
+            load_before = os.getloadavg()
             phase = Phase(config, goals, opts).run()
+            phase['load_average_before'] = load_before
             phase['load_average_after'] = os.getloadavg()
             phases.append(phase)
-            summaries.append(summarize(phase))
+            summaries.append({**summarize(phase), 'load_before': load_before[0],
+                              'load_after': phase['load_average_after'][0]})
             phase['report'] = _without_latency(phase['report'])  # the summary has percentiles
             s = summaries[-1]
             say(f'[{config} x {goals}] delivered {s["delivered"]}/{s["published"]}, '
