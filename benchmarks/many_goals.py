@@ -175,12 +175,17 @@ class Phase:
         the goals it holds, so that the phase ends with what was accepted.
         """
         opts = self.opts
-        times: dict[str, Any] = {'accepted_s': None, 'done_s': None, 'stalled_at': None}
+        times: dict[str, Any] = {'accepted_s': None, 'done_s': None, 'stalled_at': None,
+                                 'timeline': []}
         last_progress, progress_at, shown = None, time.monotonic(), 0.0
         while True:
             stats = server.request_json('stats', 'STATS', 60)
             now = time.monotonic()
             held = stats['held_accepted'] - base['held_accepted']
+            # (s since go, goals accepted, feedback published, goals active, server CPU s)
+            times['timeline'].append((round(now - go, 2), held,
+                                      stats['published'] - base['published'], stats['active'],
+                                      round(stats['cpu_s'] - base['cpu_s'], 2)))
             if times['accepted_s'] is None and held >= self.goals:
                 times['accepted_s'] = now - go
             released = stats['released'] is not None
