@@ -416,7 +416,7 @@ def profile_table(phases: Sequence[dict[str, Any]]) -> str:
 
 
 def plot(phases: Sequence[dict[str, Any]], path: Path) -> Optional[Path]:
-    """RSS and CPU over time of both processes, per phase of the largest goal count."""
+    """RSS and CPU of both processes, and goals accepted, over time: the largest goal count."""
     from harness.plot import pyplot
     try:
         plt = pyplot()
@@ -424,9 +424,14 @@ def plot(phases: Sequence[dict[str, Any]], path: Path) -> Optional[Path]:
         return None
     largest = max(p['goals'] for p in phases)
     shown = [p for p in phases if p['goals'] == largest]
-    fig, (rss_ax, cpu_ax) = plt.subplots(1, 2, figsize=(12, 4.5))
+    fig, (rss_ax, cpu_ax, goals_ax) = plt.subplots(1, 3, figsize=(16, 4.5))
     styles = {'client': '-', 'rclpy': '--'}
     for phase in shown:
+        timeline = phase['times'].get('timeline') or []
+        if timeline:
+            goals_ax.plot([row[0] for row in timeline], [row[1] for row in timeline],
+                          styles.get(phase['config'], ':'), color='tab:green',
+                          label=LABELS.get(phase['config'], phase['config']))
         for name, colour in (('client', 'tab:blue'), ('server', 'tab:orange')):
             series = [(t, rss, cpu) for t, rss, cpu in phase['samples'].get(name, [])
                       if rss is not None and cpu is not None]
@@ -440,7 +445,8 @@ def plot(phases: Sequence[dict[str, Any]], path: Path) -> Optional[Path]:
                         styles.get(phase['config'], ':'), color=colour, label=label)
     rss_ax.set(title=f'RSS, {largest} goals', xlabel='s since sampling started', ylabel='MB')
     cpu_ax.set(title='CPU (user + system)', xlabel='s since sampling started', ylabel='CPU s')
-    for ax in (rss_ax, cpu_ax):
+    goals_ax.set(title='goals accepted by the server', xlabel='s since go', ylabel='goals')
+    for ax in (rss_ax, cpu_ax, goals_ax):
         ax.grid(alpha=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
@@ -472,7 +478,8 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--out', type=Path)
     parser.add_argument('--plot', type=Path)
     parser.add_argument('--markdown', type=Path, nargs='+',
-                        help='print the tables of these result files; run nothing')
+                        help='print the tables of these result files (and with --plot, draw '
+                             'the plot again); run nothing')
     return parser.parse_args(argv)
 
 
@@ -487,6 +494,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             say(markdown_table(saved['summaries']))
             if saved.get('profile_table'):
                 say('\n' + saved['profile_table'])
+            if opts.plot:
+                say(f'plot: {plot(saved["phases"], opts.plot)}')
         return 0
     counts = [int(n) for n in opts.goals.split(',')]
     configs = opts.configs.split(',')
