@@ -483,6 +483,24 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
+def write_result(out: Path, now: datetime.datetime, opts: argparse.Namespace,
+                 argv: Optional[Sequence[str]], load_averages: dict[str, Any],
+                 summaries: list[dict[str, Any]], phases: list[dict[str, Any]],
+                 complete: bool) -> None:
+    """Write the result file: machine, date, command, load averages, tables and raw phases."""
+    result = {
+        'date': now.isoformat(), 'host': platform.node(), 'machine': load.environment_facts(),
+        'command': ' '.join([os.path.basename(sys.executable), '-m', 'benchmarks.many_goals',
+                             *(argv if argv is not None else sys.argv[1:])]),
+        'args': {k: str(v) if isinstance(v, Path) else v for k, v in vars(opts).items()},
+        'complete': complete, 'load_average': load_averages, 'summaries': summaries,
+        'table': markdown_table(summaries), 'profile_table': profile_table(phases),
+        'phases': phases,
+    }
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(result, indent=1))
+
+
 def main(argv: Optional[Sequence[str]] = None) -> int:
     """Run every goal count and configuration; write the JSON, the table and the plot."""
     opts = parse_args(argv)
@@ -516,6 +534,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             summaries.append({**summarize(phase), 'load_before': load_before[0],
                               'load_after': phase['load_average_after'][0]})
             phase['report'] = _without_latency(phase['report'])  # the summary has percentiles
+            # After every phase, so that a run cut short keeps the phases it finished.
+            write_result(out, now, opts, argv, load_averages, summaries, phases, complete=False)
             s = summaries[-1]
             say(f'[{config} x {goals}] delivered {s["delivered"]}/{s["published"]}, '
                 f'{s["goals_complete"]}/{goals} goals complete, foreign {s["foreign"]}, '
@@ -526,17 +546,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     table = markdown_table(summaries)
     profiles = profile_table(phases)
     say('\n' + table + ('\n\n' + profiles if profiles else ''))
-    result = {
-        'date': now.isoformat(), 'host': platform.node(), 'machine': load.environment_facts(),
-        'command': ' '.join([os.path.basename(sys.executable), '-m', 'benchmarks.many_goals',
-                             *(argv if argv is not None else sys.argv[1:])]),
-        'args': {k: str(v) if isinstance(v, Path) else v for k, v in vars(opts).items()},
-        'load_average': load_averages, 'summaries': summaries, 'table': table,
-        'profile_table': profiles,
-        'phases': phases,
-    }
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(result, indent=1))
+    write_result(out, now, opts, argv, load_averages, summaries, phases, complete=True)
     drawn = plot(phases, figure)
     say(f'\nresults: {out}' + (f'\nplot: {drawn}' if drawn else ''))
     return 0
