@@ -17,6 +17,8 @@ Commands on stdin, one per line:
   or one every INTERVAL_S).
 - ``progress``: reply ``PROGRESS <json>`` with the counters so far.
 - ``report``: reply ``RESULT <json>`` with everything measured since ``go``.
+- ``goals``: reply ``GOALS <json>``: feedback callbacks per goal, by goal UUID in hex (the keys of
+  ``harness.server``'s ``GOALS``), every goal sent included.
 - ``quit`` (or end of input): exit.
 
 What it counts, from ``go`` on:
@@ -31,6 +33,9 @@ What it counts, from ``go`` on:
   (``GoalStatusArray``) taken from rcl, the goal entries they listed, the most in one, and their
   serialized size (:func:`status_array_size`; no headers). The status reader keeps the last sample
   only (rclpy's default QoS), so a client that falls behind takes fewer than the wire brought.
+- ``maxrss_kb`` and ``rss_kb``: this process's peak and current resident set.
+- ``send_s``, ``last_response_s`` and ``last_callback_s``: seconds from ``go`` until every goal was
+  sent, until the last goal response, and until the last feedback callback.
 - ``updates``: filter changes (``client``/``goals``: ``feedback_filter_state.updates``;
   ``upstream``: every ``set_content_filter`` call, with ``recreations`` of the DataReader).
 
@@ -42,13 +47,14 @@ the result in a client that cannot keep up. Goal completion comes from the statu
 from __future__ import annotations
 
 import json
+import os
 import queue
 import resource
 import sys
 import threading
 import time
 import uuid
-from typing import Any, Callable
+from typing import Any, Callable, Optional
 
 import rclpy
 from action_msgs.msg import GoalStatus
@@ -57,6 +63,8 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
+
+from harness import procstat
 
 CONFIGS = ('rclpy', 'client', 'goals', 'upstream')
 #: Seconds before the probe goal, or its result request, is sent again.
@@ -151,6 +159,12 @@ def cpu_seconds() -> float:
     return usage.ru_utime + usage.ru_stime
 
 
+def memory_kb() -> dict[str, int]:
+    """This process's peak (``maxrss_kb``) and current (``rss_kb``) resident set, in kB."""
+    return {'maxrss_kb': resource.getrusage(resource.RUSAGE_SELF).ru_maxrss,
+            'rss_kb': procstat.rss_kb(os.getpid()) or 0}
+
+
 class LoadClient:
     """Sends the goals and keeps the counters; everything runs in the executor's thread."""
 
@@ -168,6 +182,10 @@ class LoadClient:
         self.callbacks = 0
         self.misrouted = 0
         self.latency_us: list[int] = []
+        self.per_goal: dict[bytes, int] = {}  # goal UUID -> feedback callbacks
+        self.send_s: Optional[float] = None
+        self.last_response_s: Optional[float] = None
+        self.last_callback_s: Optional[float] = None
         self.start_cpu = 0.0
         self.start_counters: dict[str, Any] = {}
         self.start_status: dict[str, int] = {}
@@ -180,6 +198,8 @@ class LoadClient:
             sequence = msg.feedback.sequence
             self.latency_us.append((now - sequence[1] * 1_000_000_000 - sequence[2]) // 1000)
             self.callbacks += 1
+            self.per_goal[goal_uuid] += 1
+            self.last_callback_s = time.monotonic() - self.started
             if bytes(msg.goal_id.uuid) != goal_uuid:
                 self.misrouted += 1
         return on_feedback
@@ -201,6 +221,7 @@ class LoadClient:
         for _ in range(self.goals):
             self.send_one()
             executor.spin_once(timeout_sec=0)
+        self.send_s = time.monotonic() - self.started
 
     def send_one(self) -> None:
         """Send the next goal, with its feedback callback; stop the timer after the last."""
@@ -213,11 +234,13 @@ class LoadClient:
         goal_uuid = new_uuid() if new_uuid else UUID(uuid=list(uuid.uuid4().bytes))
         key = bytes(goal_uuid.uuid)
         self.client.own_uuids.add(key)
+        self.per_goal[key] = 0
         future = self.client.send_goal_async(
             Fibonacci.Goal(order=self.order), self.on_feedback_for(key), goal_uuid=goal_uuid)
         future.add_done_callback(self._on_goal_response)
 
     def _on_goal_response(self, future: Any) -> None:
+        self.last_response_s = time.monotonic() - self.started
         handle = future.result()
         if handle.accepted:
             self.handles.append(handle)
@@ -237,6 +260,7 @@ class LoadClient:
     def report(self) -> dict[str, Any]:
         """Everything measured since ``go``."""
         counters = filter_counters(self.client)
+        counters['updates_total'] = counters['updates']
         for key in ('updates', 'recreations', 'lib_taken', 'lib_dropped'):
             if key in counters:
                 counters[key] -= self.start_counters.get(key, 0)
@@ -244,7 +268,13 @@ class LoadClient:
                 'accepted': len(self.handles), 'rejected': self.rejected,
                 'misrouted': self.misrouted, 'cpu_s': cpu_seconds() - self.start_cpu,
                 'status_max_entries': self.client.status_max_entries,
+                'send_s': self.send_s, 'last_response_s': self.last_response_s,
+                'last_callback_s': self.last_callback_s, **memory_kb(),
                 'latency_us': self.latency_us, **counters}
+
+    def goal_counts(self) -> dict[str, int]:
+        """Feedback callbacks per goal, by goal UUID in hex."""
+        return {key.hex(): count for key, count in self.per_goal.items()}
 
 
 def probe(node: Node, executor: SingleThreadedExecutor, client: Any, timeout: float) -> bool:
@@ -313,6 +343,8 @@ def main() -> None:
                 print('PROGRESS ' + json.dumps(load.progress()), flush=True)
             elif command == 'report':
                 print('RESULT ' + json.dumps(load.report()), flush=True)
+            elif command == 'goals':
+                print('GOALS ' + json.dumps(load.goal_counts()), flush=True)
             elif command == 'quit':
                 running = False
     client.destroy()

@@ -118,6 +118,25 @@ def core_backtrace(directory: str, pid: int, keep: bool = False,
     return (str(core) if keep else f'{core} (deleted)'), frames_out
 
 
+def live_backtrace(pid: int, frames: int = 25, timeout: float = 60.0) -> Optional[str]:
+    """The threads of a running process, from ``gdb -p PID -batch -ex 'thread apply all bt'``.
+
+    For a process that hangs or does not end: what each thread waits on. None when gdb is not
+    installed; ``'(gdb timed out)'`` when gdb did not finish within ``timeout`` seconds.
+    """
+    gdb = shutil.which('gdb')
+    if gdb is None:
+        return None
+    try:
+        result = subprocess.run(
+            [gdb, '-q', '-batch', '-p', str(pid), '-ex', f'thread apply all bt {frames}'],
+            capture_output=True, text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+    except subprocess.TimeoutExpired:
+        return '(gdb timed out)'
+    return '\n'.join(line for line in result.stdout.splitlines()
+                     if line.startswith(('Thread ', '#')))
+
+
 def short_frame(frame: str) -> str:
     """``#3 0x.. in ns::Class::member(args) () from lib.so`` -> ``Class::member``."""
     m = re.match(r'#\d+\s+(?:0x[0-9a-f]+ in )?(.*)$', frame)

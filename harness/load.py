@@ -143,6 +143,34 @@ def queue_depth(spec: LoadSpec) -> int:
     return max(1000, min(everything, _QUEUE_BYTES // feedback_size(spec.pad)))
 
 
+def wait_for_quiet(clients: Sequence[Proc], since: float, settle_s: float, drain_timeout: float,
+                   progress: Progress = print) -> None:
+    """Wait until no client's ``PROGRESS`` moves for 1.5 s, and ``settle_s`` after ``since``.
+
+    A client that cannot keep up is still taking its backlog after the server finished. Gives up,
+    and says so, after ``drain_timeout`` seconds.
+    """
+    deadline = time.monotonic() + drain_timeout
+    last: Optional[list[dict[str, Any]]] = None
+    stable_since = time.monotonic()
+    shown = time.monotonic()
+    while True:
+        now = [c.request_json('progress', 'PROGRESS') for c in clients]
+        t = time.monotonic()
+        if now != last:
+            last, stable_since = now, t
+        if t - stable_since >= 1.5 and t - since >= settle_s:
+            return
+        if t > deadline:
+            progress(f'    drain timeout after {drain_timeout:.0f} s; accounting what arrived')
+            return
+        if t - shown >= 3:
+            shown = t
+            taken = sum(p['own'] + p['foreign'] for p in now)
+            progress(f'    clients still taking feedback: {taken} taken so far')
+        time.sleep(0.5)
+
+
 # --- processes ------------------------------------------------------------------------------------
 
 # --- a run ----------------------------------------------------------------------------------------
@@ -255,26 +283,7 @@ class LoadRun:
 
     def _wait_for_quiet(self, clients: list[Proc], since: float) -> None:
         """Wait until the clients' counters stop moving, at least SETTLE_S after ``since``."""
-        deadline = time.monotonic() + self.spec.drain_timeout
-        last: Optional[list[dict[str, Any]]] = None
-        stable_since = time.monotonic()
-        shown = time.monotonic()
-        while True:
-            now = [c.request_json('progress', 'PROGRESS') for c in clients]
-            t = time.monotonic()
-            if now != last:
-                last, stable_since = now, t
-            if t - stable_since >= 1.5 and t - since >= self.spec.settle_s:
-                return
-            if t > deadline:
-                self.progress(f'    drain timeout after {self.spec.drain_timeout:.0f} s; '
-                              'accounting what arrived')
-                return
-            if t - shown >= 3:
-                shown = t
-                taken = sum(p['own'] + p['foreign'] for p in now)
-                self.progress(f'    clients still taking feedback: {taken} taken so far')
-            time.sleep(0.5)
+        wait_for_quiet(clients, since, self.spec.settle_s, self.spec.drain_timeout, self.progress)
 
     def run_phase(self, config: str, clients: Optional[int] = None) -> dict[str, Any]:
         """Run one configuration under this load; return its raw figures and summary.

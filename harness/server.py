@@ -2,7 +2,8 @@
 """The Fibonacci action server of every demo, benchmark and test, in a process of its own.
 
 Usage: ``python -m harness.server ACTION PERIOD_S [--pad N] [--depth N|all] [--result-timeout S]
-[--stats-every S] [--late-feedback S] [--executor single|multi] [--goal-depth N]``
+[--stats-every S] [--late-feedback S] [--executor single|multi] [--goal-depth N]
+[--hold-goals N]``
 
 Goal ``order`` is the number of feedback messages the goal gets (a negative order is rejected;
 cancels are accepted). Each feedback ``sequence`` is ``[k, seconds, nanoseconds] + [0] * PAD``:
@@ -14,6 +15,9 @@ put when a tick takes long. The result's ``sequence`` is ``[feedback messages pu
 goal]``, so that a client can count what it lost, canceled goals included. With
 ``--late-feedback S``, a goal that succeeded gets one more feedback message (``k = order``) S
 seconds after its result, the way a sample lost on the way and resent arrives at a client.
+With ``--hold-goals N``, goals of positive order get their first feedback at once and then wait,
+with no further feedback, until N of them have been accepted (or the command ``release`` comes):
+so that N goals are live at once, however long their requests take to arrive.
 
 Execute callbacks are coroutines, so one single-threaded executor serves any number of goals
 (rclpy's ActionServer dropped goal requests under a MultiThreadedExecutor here).
@@ -29,14 +33,18 @@ in reply to the command ``stats`` on stdin, and every ``--stats-every`` seconds 
 watcher then has the counters from just before a crash). The JSON holds ``t`` (monotonic seconds),
 ``published`` (feedback messages), ``accepted`` (goals), ``active`` (goals still running),
 ``late_ticks`` (ticks that started more than a period late: the server could not keep the rate),
+``peak_active`` (the most goals running at once), ``held_accepted`` (goals of positive order
+accepted), ``released`` (seconds from the start of the server until ``--hold-goals`` let the goals
+go, or null), ``release_reason``, ``maxrss_kb`` (this process's peak resident set),
 ``goal_requests``, ``goal_responses`` and ``goal_response_errors`` (goal requests taken from rcl,
 goal responses sent, and sends that failed: rclpy logs those and drops the goal),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
 line), ``guard_calls``, ``guard_filter`` and ``guard_writers`` (its call, filter-verdict and
 writer-limit counters) and ``writers`` (the GUIDs of the feedback and status writers, in hex).
-``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far, by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). End
-of input stops the server.
+``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
+by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). The command
+``release`` ends ``--hold-goals``. End of input stops the server.
 """
 
 from __future__ import annotations
@@ -153,9 +161,18 @@ class TickingServer:
     def __init__(self, node: Node, executor: Executor, action: str, period: float,
                  pad: int = 0, depth: Optional[str] = None,
                  result_timeout: int = DEFAULT_RESULT_TIMEOUT_S,
-                 late_feedback: float = 0.0, goal_depth: Optional[int] = None) -> None:
+                 late_feedback: float = 0.0, goal_depth: Optional[int] = None,
+                 hold_goals: int = 0) -> None:
         """Create the action server on ``node`` and start the ticker thread."""
         self.executor = executor
+        self.started = time.monotonic()
+        # --hold-goals: goals of positive order wait after their first feedback until this many
+        # were accepted; 0 holds nothing.
+        self.hold_goals = hold_goals
+        self.held_accepted = 0
+        self.released_at: Optional[float] = None if hold_goals > 0 else self.started
+        self.release_reason = ''
+        self.peak_active = 0
         self.period = period
         self.late_feedback = late_feedback
         self.late: list[tuple[float, Any, int]] = []  # (due, goal handle, k) after a success
@@ -210,12 +227,27 @@ class TickingServer:
         with self.lock:
             self.accepted += 1
             self.active[id(goal_handle)] = entry
+            self.peak_active = max(self.peak_active, len(self.active))
+            if order > 0:
+                self.held_accepted += 1
+                if self.held_accepted >= self.hold_goals:
+                    self._release('all held goals accepted')
         outcome = await done
         if outcome == 'canceled':
             goal_handle.canceled()
         else:
             goal_handle.succeed()
         return Fibonacci.Result(sequence=[entry[1]])
+
+    def release(self, reason: str) -> None:
+        """Let the held goals go on (``--hold-goals``); the first call counts."""
+        with self.lock:
+            self._release(reason)
+
+    def _release(self, reason: str) -> None:
+        if self.released_at is None:
+            self.released_at = time.monotonic()
+            self.release_reason = reason
 
     def tick(self) -> None:
         """Every period, publish the next feedback of each running goal, or finish the goal."""
@@ -232,9 +264,12 @@ class TickingServer:
                 due = time.monotonic()
             with self.lock:
                 goals = list(self.active.items())
+                holding = self.released_at is None
             finished = []
             for key, entry in goals:
                 goal_handle, k, order, done = entry[:4]
+                if holding and order > 0 and not goal_handle.is_cancel_requested:
+                    continue
                 if goal_handle.is_cancel_requested:
                     finished.append((key, done, 'canceled'))
                 elif k >= order:
@@ -272,6 +307,10 @@ class TickingServer:
         with self.lock:
             return {**requests, 't': time.monotonic(), 'published': self.published,
                     'accepted': self.accepted, 'active': len(self.active),
+                    'peak_active': self.peak_active, 'held_accepted': self.held_accepted,
+                    'released': (None if self.released_at is None
+                                 else self.released_at - self.started),
+                    'release_reason': self.release_reason, 'maxrss_kb': usage.ru_maxrss,
                     'late_ticks': self.late_ticks, 'intervals': self.intervals,
                     'interval_s': self.interval_s, 'cpu_s': usage.ru_utime + usage.ru_stime,
                     'guard': guard.status(), 'guard_calls': guard.call_counts(),
@@ -295,6 +334,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help='SingleThreadedExecutor (default) or MultiThreadedExecutor')
     parser.add_argument('--goal-depth', type=int,
                         help="the goal service's depth alone (keep-last, reliable)")
+    parser.add_argument('--hold-goals', type=int, default=0,
+                        help='goals wait after their first feedback until this many were accepted '
+                             '(or the command release)')
     return parser.parse_args(argv)
 
 
@@ -306,7 +348,8 @@ def main(argv: list[str]) -> None:
     executor = MultiThreadedExecutor() if args.executor == 'multi' else SingleThreadedExecutor()
     executor.add_node(node)
     server = TickingServer(node, executor, args.action, args.period, args.pad, args.depth,
-                           args.result_timeout, args.late_feedback, args.goal_depth)
+                           args.result_timeout, args.late_feedback, args.goal_depth,
+                           args.hold_goals)
     # The RTPS GUIDs of the feedback and status writers, to tell their packets apart on the wire.
     writers = {name: [bytes(info.endpoint_gid).hex() for info in
                       node.get_publishers_info_by_topic(f'{args.action}/_action/{name}')]
@@ -331,6 +374,8 @@ def main(argv: list[str]) -> None:
     for line in sys.stdin:
         if line.strip() == 'stats':
             report()
+        elif line.strip() == 'release':
+            server.release('command')
         elif line.strip() == 'goals':
             with server.lock:
                 counts = json.dumps(server.published_per_goal)

@@ -11,7 +11,6 @@ import os
 import queue
 import random
 import re
-import shutil
 import signal
 import subprocess
 import sys
@@ -30,6 +29,7 @@ from cft_action import ContentFilterError, create_filtered_subscription, sql
 from cft_action.filters import dds_literals
 from cft_action.message_types import message_schema
 from cft_action.message_yaml import message_to_yaml
+from harness.crash import live_backtrace
 from harness.proc import Proc
 from harness.ros import unique_name
 from tests.support import helper_process
@@ -47,16 +47,10 @@ BURST = 30
 
 def _backtrace(pid: int) -> str:
     """The threads of a process that did not end, from gdb if it is installed: what it waits on."""
-    if shutil.which('gdb') is None:
+    threads = live_backtrace(pid)
+    if threads is None:
         return ''
-    try:
-        result = subprocess.run(
-            ['gdb', '-q', '-batch', '-p', str(pid), '-ex', 'thread apply all bt 25'],
-            capture_output=True, text=True, timeout=60)
-    except subprocess.TimeoutExpired:
-        return '\n(gdb timed out)'
-    frames = [line for line in result.stdout.splitlines() if line.startswith(('Thread ', '#'))]
-    return '\nthreads of the process that did not end:\n' + '\n'.join(frames)[-12000:]
+    return '\nthreads of the process that did not end:\n' + threads[-12000:]
 
 
 class Cli:
