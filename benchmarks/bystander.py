@@ -265,7 +265,7 @@ def markdown(results: dict[str, Any]) -> str:
 def plot(results: dict[str, Any], path: Path) -> Path:
     """Bytes per sample against K, next to plain and next to filtered neighbours, one panel per
     size (solid: everything received; dashed: feedback data alone); return the path."""
-    from harness.plot import COLOURS, pyplot
+    from harness.plot import COLOURS, pyplot, save
     plt = pyplot()
     records = [r for r in results['sizes'] if r.get('rows')]
     if not records:
@@ -293,11 +293,7 @@ def plot(results: dict[str, Any], path: Path) -> Path:
         ax.legend(fontsize=8)
     fig.suptitle('What a plain rclpy client pays per sample for filtered clients next to it',
                  fontsize=11)
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save(fig, path)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

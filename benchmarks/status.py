@@ -442,7 +442,7 @@ def _measured(ax: Any, points: list[dict[str, Any]], x: Callable[[dict[str, Any]
 
 def plot(all_points: list[dict[str, Any]], path: Path) -> Path:
     """Status bytes per client vs N for each M, and vs result_timeout; return the PNG's path."""
-    from harness.plot import COLOURS, finish_axes, pyplot
+    from harness.plot import COLOURS, finish_axes, pyplot, save
     plt = pyplot()
     fig, axes = plt.subplots(1, 3, figsize=(17, 5))
     markers = {'rclpy': 'o', 'client': 'x', 'goals': '+', 'upstream': 's'}
@@ -489,11 +489,7 @@ def plot(all_points: list[dict[str, Any]], path: Path) -> Path:
                      label='largest status sample (UDP datagram)')
         finish_axes(axes[2], "server's result_timeout, s (log)", 'kB',
                     'status message size vs result_timeout')
-    fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=100)
-    plt.close(fig)
-    return path
+    return save(fig, path)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

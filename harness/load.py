@@ -521,23 +521,6 @@ def run_load(spec: LoadSpec, configs: Sequence[str], progress: Progress = print,
             'domain_id': run.env['ROS_DOMAIN_ID'], 'phases': phases}
 
 
-def int_list(text: str) -> list[int]:
-    """``'1,4,16'`` as ``[1, 4, 16]``: a command line's list of counts (an argparse type)."""
-    return [int(v) for v in text.split(',') if v.strip()]
-
-
-def config_list(text: str) -> list[str]:
-    """Comma-separated configuration names, checked against :data:`CONFIG_LABELS` (an argparse
-    type)."""
-    import argparse
-    names = [c.strip() for c in text.split(',') if c.strip()]
-    unknown = sorted(set(names) - set(CONFIG_LABELS))
-    if unknown:
-        raise argparse.ArgumentTypeError(f'unknown configurations {", ".join(unknown)}; '
-                                         f'known: {", ".join(CONFIG_LABELS)}')
-    return names
-
-
 def environment_facts() -> dict[str, Any]:
     """Machine and versions, for a result file."""
     from importlib import metadata

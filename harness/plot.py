@@ -19,6 +19,15 @@ def pyplot() -> Any:
     return plt
 
 
+def save(fig: Any, path: Path) -> Path:
+    """Lay out ``fig``, write it to ``path`` (creating its folder) and close it."""
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=100)
+    pyplot().close(fig)
+    return path
+
+
 def finish_axes(ax: Any, xlabel: str, ylabel: str, title: str, xbase: int = 10,
                 ylog: bool = True) -> None:
     """Label a panel with logarithmic axes (x in ``xbase``; y unless ``ylog`` is False), a grid
