@@ -51,7 +51,10 @@ def set_filter(subscription_ptr: int, topic: str, expression: str,
     if not expression:
         raise ContentFilterError(
             f'refusing to set an empty filter expression on {topic}: rmw_fastrtps would destroy '
-            'and recreate the DataReader, which is a use-after-free under a waiting executor')
+            'and recreate the DataReader, which is a use-after-free under a waiting executor. To '
+            'receive nothing, set an expression that never matches '
+            '(cft_action.filters.never_match_on(field)); to receive everything, one that always '
+            'does, or create an unfiltered subscription')
     try:
         parameters = dds_literals(expression_parameters)
     except (TypeError, ValueError) as e:
@@ -171,7 +174,7 @@ class FilteredReader:
         :raises ContentFilterError: if the reader is not active, or the change is rejected.
         """
         with self.lock:
-            if self._filter is None or self._handle is None or self._ended:
+            if self._filter is None or self._handle is None:
                 raise ContentFilterError(
                     f'the filter of {self._topic} cannot change: {self._reason or "not installed"}')
             if options == self._filter:

@@ -874,7 +874,7 @@ def compile_filter(expression: str, parameters: Iterable[str] = (),
 # equalities of a field with a small decimal integer, ANDed, and conjunctions in parentheses ORed.
 # It has no string, parameter, pattern or literal out of range, and its grammar is that of
 # _TOKEN and parse: every expression of this shape compiles (tests/test_sql.py checks both ways).
-_KEYWORD = r'(?:AND|and|OR|or|NOT|not|BETWEEN|between|LIKE|like|MATCH|match|TRUE|true|FALSE|false)'
+_KEYWORD = f'(?:{"|".join(_KEYWORDS)})'
 _EQUALITY = (rf'(?!{_KEYWORD}\b)[A-Za-z_]\w*(?:\[\d{{1,9}}\])?'
              rf'(?:\.(?!{_KEYWORD}\b)[A-Za-z_]\w*(?:\[\d{{1,9}}\])?)* = (?:0|[1-9]\d{{0,17}})')
 _CONJUNCTION = rf'{_EQUALITY}(?: AND {_EQUALITY})*'

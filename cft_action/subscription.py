@@ -200,12 +200,6 @@ def set_content_filter(subscription: Subscription, filter_expression: str,
         (rmw_fastrtps would recreate its reader under a waiting executor), or if rcl rejects it;
         the subscription then keeps its previous filter.
     """
-    if not filter_expression:
-        raise ContentFilterError(
-            'refusing to set an empty filter expression: rmw_fastrtps would destroy and recreate '
-            'the DataReader, which is a use-after-free under a waiting executor. To receive '
-            'nothing, use cft_action.filters.NEVER_MATCH; to receive everything, create an '
-            'unfiltered subscription')
     with subscription.handle:
         pointer = subscription.handle.pointer
         if not has_filter(pointer):
