@@ -71,13 +71,18 @@ def _preloaded() -> Optional[ctypes.CDLL]:
     process.cft_guard_state.restype = ctypes.c_int
     process.cft_guard_reason.argtypes = []
     process.cft_guard_reason.restype = ctypes.c_char_p
-    process.cft_guard_call_count.argtypes = [ctypes.c_int]
-    process.cft_guard_call_count.restype = ctypes.c_ulong
-    process.cft_guard_filter_count.argtypes = [ctypes.c_int]
-    process.cft_guard_filter_count.restype = ctypes.c_ulong
-    process.cft_guard_writer_qos_count.argtypes = [ctypes.c_int]
-    process.cft_guard_writer_qos_count.restype = ctypes.c_ulong
     return process
+
+
+def _counters(symbol: str, names: tuple[str, ...]) -> dict[str, int]:
+    """The guard's counters ``symbol(0)``, ``symbol(1)``, ... as ``names``; {} if not preloaded."""
+    process = _preloaded()
+    if process is None:
+        return {}
+    count = getattr(process, symbol)
+    count.argtypes = [ctypes.c_int]
+    count.restype = ctypes.c_ulong
+    return {name: int(count(i)) for i, name in enumerate(names)}
 
 
 def is_active() -> bool:
@@ -113,12 +118,9 @@ def call_counts() -> dict[str, int]:
     and ``nested_unlocked`` (nested writes that went on without their lock to avoid a deadlock).
     An empty dict when the guard is not preloaded.
     """
-    process = _preloaded()
-    if process is None:
-        return {}
-    names = ('perform_create_new_change', 'process_reader_filter_info', 'remove_reader_filter',
-             'nested_unlocked')
-    return {name: int(process.cft_guard_call_count(i)) for i, name in enumerate(names)}
+    return _counters('cft_guard_call_count', ('perform_create_new_change',
+                                               'process_reader_filter_info',
+                                               'remove_reader_filter', 'nested_unlocked'))
 
 
 #: The counters of cft_guard_filter_count() in _guard_filter.c, in its order.
@@ -144,10 +146,7 @@ def filter_counts() -> dict[str, int]:
 
     An empty dict when the guard is not preloaded.
     """
-    process = _preloaded()
-    if process is None:
-        return {}
-    return {name: int(process.cft_guard_filter_count(i)) for i, name in enumerate(FILTER_COUNTERS)}
+    return _counters('cft_guard_filter_count', FILTER_COUNTERS)
 
 
 #: The counters of cft_guard_writer_qos_count() in _guard_writer_qos.c, in its order.
@@ -169,11 +168,7 @@ def writer_limits() -> dict[str, int]:
 
     An empty dict when the guard is not preloaded.
     """
-    process = _preloaded()
-    if process is None:
-        return {}
-    return {name: int(process.cft_guard_writer_qos_count(i))
-            for i, name in enumerate(WRITER_QOS_COUNTERS)}
+    return _counters('cft_guard_writer_qos_count', WRITER_QOS_COUNTERS)
 
 
 def environment(env: Optional[Mapping[str, str]] = None) -> dict[str, str]:
