@@ -436,7 +436,8 @@ def positive_float(text: str) -> float:
     return value
 
 
-def add_topic_arguments(parser: argparse.ArgumentParser, what: str, timeout_help: str, *,
+def add_topic_arguments(parser: argparse.ArgumentParser, what: str,
+                        timeout_help: str = 'Exit after S seconds (status 0).', *,
                         window: Optional[int] = None) -> None:
     """What every topic verb has: the positional ``topic_name`` and optional ``message_type``, the
     content filter, the QoS and ``--timeout``; and ros2cli's ``--window/-w`` of ``hz`` and ``bw``

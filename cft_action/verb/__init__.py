@@ -14,3 +14,8 @@ verbs share is in :mod:`cft_action.topic_api`.
 
 #: The verbs of ``cft-action topic``, each a module of this package.
 TOPIC_VERBS = ('bw', 'echo', 'hz')
+
+
+def examples(*command_lines: str) -> str:
+    """An ``EPILOG``: the example command lines under ``examples:``, as ros2cli shows them."""
+    return '\n'.join(['examples:', *(f'  {line}' for line in command_lines)])

@@ -14,6 +14,9 @@ from collections import deque
 from typing import Any, Optional
 
 from cft_action import topic_api
+from cft_action.verb import examples
+
+DEFAULT_WINDOW_SIZE = 100
 
 HELP = 'Display bandwidth used by topic'
 
@@ -23,19 +26,16 @@ Display the bandwidth used by the messages of a topic that pass the content filt
 The content filter (--content-filter, DDS-SQL) is applied by the middleware: messages that do not
 match never reach this process."""
 
-EPILOG = (
-    'examples:\n'
-    '  cft-action topic bw /strings std_msgs/msg/String --content-filter "data = %0" '
-    '--content-filter-params world\n'
-    '  cft-action topic bw /scan --content-filter "ranges[0] < 0.5" --window 50')
-
-DEFAULT_WINDOW_SIZE = 100
+EPILOG = examples(
+    'cft-action topic bw /strings std_msgs/msg/String --content-filter "data = %0" '
+    '--content-filter-params world',
+    'cft-action topic bw /scan --content-filter "ranges[0] < 0.5" --window 50')
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """ros2cli's ``bw`` arguments, the content filter, the QoS and ``--timeout``."""
     topic_api.add_topic_arguments(parser, 'monitor for bandwidth utilization',
-                                  'Exit after S seconds (status 0).', window=DEFAULT_WINDOW_SIZE)
+                                  window=DEFAULT_WINDOW_SIZE)
 
 
 def _bytes(value: float) -> str:

@@ -15,6 +15,7 @@ from typing import Any, Callable, Optional
 import yaml
 
 from cft_action import topic_api
+from cft_action.verb import examples
 from cft_action.message_yaml import message_to_csv, message_to_yaml
 
 HELP = 'Output messages from a topic'
@@ -28,15 +29,14 @@ implementation without content filtering), the command exits with status 2 and t
 prints no message. --filter is ros2 topic echo's: a Python expression on the message m, evaluated
 in this process on what the content filter let through."""
 
-EPILOG = (
-    'examples:\n'
-    '  cft-action topic echo /chatter std_msgs/msg/String --content-filter "data = %0" '
-    '--content-filter-params hello\n'
-    '  cft-action topic echo /chatter std_msgs/msg/String --filter "m.data == \'hello\'"\n'
-    '  cft-action topic echo /weather --content-filter "temperature > %0" '
-    '--content-filter-params 30.0\n'
-    '  cft-action topic echo /diagnostics --content-filter "status[0].level >= 2" --once\n'
-    '  cft-action topic echo /odom --content-filter "pose.pose.position.x BETWEEN -1.0 AND 1.0" '
+EPILOG = examples(
+    'cft-action topic echo /chatter std_msgs/msg/String --content-filter "data = %0" '
+    '--content-filter-params hello',
+    'cft-action topic echo /chatter std_msgs/msg/String --filter "m.data == \'hello\'"',
+    'cft-action topic echo /weather --content-filter "temperature > %0" '
+    '--content-filter-params 30.0',
+    'cft-action topic echo /diagnostics --content-filter "status[0].level >= 2" --once',
+    'cft-action topic echo /odom --content-filter "pose.pose.position.x BETWEEN -1.0 AND 1.0" '
     '--field pose.pose.position --csv')
 
 DEFAULT_TRUNCATE_LENGTH = 128

@@ -8,6 +8,8 @@ import argparse
 import os
 import sys
 
+from cft_action.verb import examples
+
 HELP = 'Run a command with the server guard preloaded'
 
 DESCRIPTION = """\
@@ -19,10 +21,8 @@ each writer's publish with the discovery updates of its filters. Preload it into
 clients need nothing. On a Fast DDS version it does not know, it prints one line and stays out of
 the way. Set CFT_GUARD_DEBUG=1 to see what it does."""
 
-EPILOG = """\
-examples:
-  cft-action guard -- python my_action_server.py
-  LD_PRELOAD=$(cft-action guard --print-path) ros2 run my_pkg my_server"""
+EPILOG = examples('cft-action guard -- python my_action_server.py',
+                  'LD_PRELOAD=$(cft-action guard --print-path) ros2 run my_pkg my_server')
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:

@@ -11,6 +11,9 @@ from collections import deque
 from typing import Any, Callable, Optional
 
 from cft_action import topic_api
+from cft_action.verb import examples
+
+DEFAULT_WINDOW_SIZE = 10000
 
 HELP = 'Print the average publishing rate to screen'
 
@@ -22,20 +25,17 @@ The content filter (--content-filter, DDS-SQL) is applied by the middleware: mes
 match never reach this process. --filter is ros2 topic hz's: a Python expression on the message m,
 evaluated in this process."""
 
-EPILOG = (
-    'examples:\n'
-    '  cft-action topic hz /strings std_msgs/msg/String --content-filter "data = %0" '
-    '--content-filter-params world\n'
-    '  cft-action topic hz /chatter --content-filter "data LIKE \'Hello%\'" --window 100\n'
-    '  cft-action topic hz /chatter --filter "m.data.startswith(\'Hello\')"')
-
-DEFAULT_WINDOW_SIZE = 10000
+EPILOG = examples(
+    'cft-action topic hz /strings std_msgs/msg/String --content-filter "data = %0" '
+    '--content-filter-params world',
+    'cft-action topic hz /chatter --content-filter "data LIKE \'Hello%\'" --window 100',
+    'cft-action topic hz /chatter --filter "m.data.startswith(\'Hello\')"')
 
 
 def add_arguments(parser: argparse.ArgumentParser) -> None:
     """ros2cli's ``hz`` arguments, the content filter, the QoS and ``--timeout``."""
     topic_api.add_topic_arguments(parser, "listen to (e.g. '/chatter')",
-                                  'Exit after S seconds (status 0).', window=DEFAULT_WINDOW_SIZE)
+                                  window=DEFAULT_WINDOW_SIZE)
     topic_api.add_python_filter_argument(
         parser, 'only measure messages matching the specified Python expression (on m, the '
                 'message), evaluated in this process after the content filter')
