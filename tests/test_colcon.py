@@ -1,5 +1,6 @@
-"""`colcon build` of the package in a workspace, on top of an existing ROS: the install path for
-users of apt's ROS 2 Jazzy or of their own workspaces.
+"""The install path for users of an existing ROS (apt's ROS 2 Jazzy, or their own workspaces):
+`pip install cft-action` brings no ROS wheel, and `colcon build` builds the package in a
+workspace on top of that ROS.
 
 There is no apt ROS here: this venv, with the ROS wheels, is the underlay. colcon (from PyPI, the
 test extra) builds with the Python it runs on, so the venv's ``bin`` first on ``PATH`` is all it
@@ -10,6 +11,7 @@ client imports, against a server under the install space's guard.
 
 from __future__ import annotations
 
+import importlib.metadata
 import os
 import shutil
 import subprocess
@@ -57,6 +59,15 @@ def _sourced(workspace: Path, command: str, env: dict[str, str]) -> subprocess.C
     return subprocess.run(
         ['bash', '-c', f'source {workspace}/install/setup.bash && {command}'], env=env,
         cwd=workspace, capture_output=True, text=True, timeout=60)
+
+
+def test_pip_installs_no_ros_wheel_without_the_jazzy_extra():
+    """`pip install cft-action` next to an existing ROS must not bring a second ROS from PyPI."""
+    requirements = importlib.metadata.requires('cft-action') or []
+    always = [r for r in requirements if 'extra ==' not in r]
+    assert always == ['pyyaml>=6'], always
+    ros = [r for r in requirements if r.startswith('ros-')]
+    assert len(ros) == 3 and all(r.endswith('extra == "jazzy"') for r in ros), ros
 
 
 @pytest.fixture(scope='module')
