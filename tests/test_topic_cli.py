@@ -232,16 +232,18 @@ def test_echo_prints_only_matching_messages(publisher, clis):
     ints = clis('topic', 'echo', f'{prefix}/ints', 'std_msgs/msg/Int32',
                 '--content-filter', 'data > %0', '--content-filter-params', '25', *RELIABLE)
     floats = clis('topic', 'echo', f'{prefix}/floats',  # the type comes from the graph
-                  '--content-filter', 'data >= %0 AND data < %1', '--content-filter-params', '2.0', '3.5', *RELIABLE)
+                  '--content-filter', 'data >= %0 AND data < %1',
+                  '--content-filter-params', '2.0', '3.5', *RELIABLE)
     bare = clis('topic', 'echo', f'{prefix}/strings', 'std_msgs/msg/String',
                 '--content-filter', 'data = %0', '--content-filter-params', 'world', *RELIABLE)
     like = clis('topic', 'echo', f'{prefix}/strings', 'std_msgs/msg/String',
                 '--content-filter', "data LIKE 'hello%'", *RELIABLE)
     once = clis('topic', 'echo', f'{prefix}/ints', 'std_msgs/msg/Int32',
-                '--content-filter', 'data >= %0', '--content-filter-params', '10', '--once', *RELIABLE)
+                '--content-filter', 'data >= %0', '--content-filter-params', '10', '--once',
+                *RELIABLE)
     client = clis('topic', 'echo', f'{prefix}/strings', 'std_msgs/msg/String',
-                  '--content-filter', 'data = %0', '--content-filter-params', 'hello', '--content-filter-fallback=client',
-                  *RELIABLE, command=NO_CFT_CLI)
+                  '--content-filter', 'data = %0', '--content-filter-params', 'hello',
+                  '--content-filter-fallback=client', *RELIABLE, command=NO_CFT_CLI)
     for topic, count in (('ints', 2), ('floats', 1), ('strings', 3)):
         assert child.request(f'wait {topic} {count}', 'MATCHED', timeout=30) == 'MATCHED'
     child.request(f'burst {BURST}', 'SENT')
@@ -364,8 +366,8 @@ def test_hz_and_bw_report_the_filtered_rate(publisher, clis):
     hz_python = clis('topic', 'hz', f'{prefix}/strings', 'std_msgs/msg/String',
                      '--filter', "m.data == 'world'", *RELIABLE)
     bw_client = clis('topic', 'bw', f'{prefix}/strings', 'std_msgs/msg/String',  # raw + Python
-                     '--content-filter', ' data = %0 ', '--content-filter-params', 'world', '--content-filter-fallback=client',
-                     *RELIABLE, command=NO_CFT_CLI)
+                     '--content-filter', ' data = %0 ', '--content-filter-params', 'world',
+                     '--content-filter-fallback=client', *RELIABLE, command=NO_CFT_CLI)
     assert child.request('wait strings 4', 'MATCHED', timeout=30) == 'MATCHED'
     count, period = 250, 0.02  # 50 Hz for 5 s; 'world' is every third sample
     start = time.monotonic()
@@ -432,8 +434,8 @@ def test_bad_expression_exits_2_naming_it(msg_type, expression, params, reason):
 
 
 def test_rmw_without_content_filtering_is_refused():
-    cli = run_cli('topic', 'hz', '/cft_cli_nocft', 'std_msgs/msg/Int32', '--content-filter', 'data > 3',
-                  '--timeout', '20', command=NO_CFT_CLI)
+    cli = run_cli('topic', 'hz', '/cft_cli_nocft', 'std_msgs/msg/Int32',
+                  '--content-filter', 'data > 3', '--timeout', '20', command=NO_CFT_CLI)
     assert cli.proc.returncode == 2, cli.log()
     assert cli.stdout == []
     assert ("cft-action topic hz: cannot filter /cft_cli_nocft: content filter 'data > 3': "
