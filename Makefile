@@ -1,18 +1,27 @@
 # Set-up is part of every target: `make test`, `make lint` and `make demo` create .venv and install
 # into it. Only cft_action is installed; demos, benchmarks, tests and what they share (harness/)
 # are imported from this directory, which `python -m` and pytest put on sys.path.
+#
+# PYTHON picks the interpreter (3.11 or 3.12), e.g. `make test PYTHON=python3.12`. Each Python
+# version has its own venv, so that switching needs no `make clean`: .venv for 3.11, the default,
+# and .venv-3.12 for 3.12 (VENV=... chooses another directory).
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
-VENV := .venv
+PYTHON_VERSION := $(shell $(PYTHON) -c 'import sys; print("%d.%d" % sys.version_info[:2])')
+ifeq ($(PYTHON_VERSION),)
+$(error cannot run PYTHON=$(PYTHON))
+endif
+VENV ?= $(if $(filter 3.11,$(PYTHON_VERSION)),.venv,.venv-$(PYTHON_VERSION))
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
 .PHONY: test lint demo bench clean
 
+# [jazzy] is ROS 2 Jazzy from PyPI, so that a machine without ROS needs nothing else.
 $(STAMP): pyproject.toml setup.py cft_action/_guard.c cft_action/_guard_filter.c cft_action/_guard.h \
 		cft_action/_guard_writer_qos.c \
 		cft_action/_reader_lock.c
 	$(PYTHON) -m venv $(VENV)
-	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[test,bench,lint]'
+	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[jazzy,test,bench,lint]'
 	touch $(STAMP)
 
 test: $(STAMP)
@@ -30,4 +39,4 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.sweep
 
 clean:
-	rm -rf $(VENV) build *.egg-info cft_action/*.so .mypy_cache .ruff_cache
+	rm -rf .venv .venv-3.* build *.egg-info cft_action/*.so .mypy_cache .ruff_cache

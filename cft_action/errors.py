@@ -10,7 +10,7 @@ type raises :class:`TypeError`, as in rclpy.
 The errors that belong to one module are defined there, and subclass these:
 :class:`cft_action.sql.FilterError` and :class:`cft_action.goal_filter.ExpressionTooLong`
 (``ValueError``), :class:`cft_action.guard.GuardUnavailable` (``RuntimeError``) and
-:class:`cft_action.topic_tools.TopicToolError`.
+:class:`cft_action.topic_api.TopicToolError`.
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
-"""ROS messages as YAML, as ``ros2 topic echo`` prints them.
+"""ROS messages as YAML and CSV, as ``ros2 topic echo`` prints them.
 
-Jazzy has no ``rosidl_runtime_py`` on PyPI, so :func:`message_to_yaml` is written here once.
+Jazzy has no ``rosidl_runtime_py`` on PyPI, so :func:`message_to_yaml` and :func:`message_to_csv`
+are written here once.
 """
 
 from __future__ import annotations
@@ -15,7 +16,7 @@ import yaml
 
 from cft_action.message_types import fields_of, is_message, type_name
 
-__all__ = ['message_to_ordereddict', 'message_to_yaml']
+__all__ = ['message_to_csv', 'message_to_ordereddict', 'message_to_yaml']
 
 
 def _abbreviate(value, slot) -> str:
@@ -97,3 +98,37 @@ def message_to_yaml(msg, *, truncate_length: Optional[int] = None, no_arr: bool 
                                no_str=no_str),
         Dumper=_YamlDumper, allow_unicode=True, width=sys.maxsize, default_flow_style=flow_style,
         sort_keys=False)
+
+
+def message_to_csv(msg, *, truncate_length: Optional[int] = None, no_arr: bool = False,
+                   no_str: bool = False) -> str:
+    """Return every field of ``msg``, recursively, separated by commas, as ``ros2 topic echo
+    --csv`` prints it (rosidl_runtime_py's ``message_to_csv``).
+
+    The arguments are those of :func:`message_to_ordereddict`; an array cut at ``truncate_length``
+    ends with ``...``, and ``str()`` spells every value (a ``byte`` as ``b'A'``).
+    """
+    return ','.join(_csv(getattr(msg, name), slot, truncate_length, no_arr, no_str)
+                    for name, slot in fields_of(msg))
+
+
+def _csv(value, slot, truncate_length, no_arr, no_str) -> str:
+    if isinstance(value, (list, tuple, array.array)) or (
+            hasattr(value, 'dtype') and getattr(value, 'ndim', 0) > 0):
+        if no_arr and slot is not None:
+            return _abbreviate(value, slot)
+        items = list(value)
+        cut = truncate_length is not None and len(items) > truncate_length
+        texts = [_csv(v, None, truncate_length, no_arr, no_str) for v in items[:truncate_length]]
+        return ','.join(texts + ['...'] if cut else texts)
+    if is_message(value):
+        return message_to_csv(value, truncate_length=truncate_length, no_arr=no_arr,
+                              no_str=no_str)
+    if isinstance(value, str) and no_str:
+        return f'<string length: <{len(value)}>>'
+    if isinstance(value, str) and truncate_length is not None and len(value) > truncate_length:
+        value = value[:truncate_length] + '...'
+    elif isinstance(value, bytes) and truncate_length is not None \
+            and len(value) > truncate_length:
+        value = value[:truncate_length] + b'...'
+    return str(value)

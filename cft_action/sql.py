@@ -1,8 +1,8 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 """A Python evaluator for the DDS-SQL filter expressions of Fast DDS 2.14: pure, no ROS import.
 
-This is the client-side fallback of ``cft-action topic ... --filter-fallback=client`` and the
-diagnostician of expressions that Fast DDS rejects. Its verdicts follow what Fast DDS 2.14 does,
+This is the client-side fallback of ``cft-action topic ... --content-filter-fallback=client`` and
+the diagnostician of expressions that Fast DDS rejects. Its verdicts follow what Fast DDS 2.14 does,
 quirks included, so that a filter gives the same messages whether the middleware or Python applies
 it (``tests/test_topic_cli.py`` checks this against real filtered subscriptions):
 

@@ -43,8 +43,8 @@ def test_every_error_of_the_package_derives_from_the_base():
     ('cft_action.guard', 'GuardUnavailable', RuntimeError),
     ('cft_action.goal_filter', 'ExpressionTooLong', ValueError),
     ('cft_action.sql', 'FilterError', ValueError),
-    ('cft_action.topic_tools', 'TopicToolError', Exception),
-    ('cft_action.topic_tools', 'FilterUnavailable', Exception),
+    ('cft_action.topic_api', 'TopicToolError', Exception),
+    ('cft_action.topic_api', 'FilterUnavailable', Exception),
 ])
 def test_todays_names_import_where_they_did(module, name, builtin):
     error = getattr(importlib.import_module(module), name)

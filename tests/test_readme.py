@@ -4,6 +4,7 @@ import re
 import subprocess
 import sys
 from pathlib import Path
+from typing import Optional
 
 from cft_action import guard
 from tests.support import action_server
@@ -24,22 +25,38 @@ def test_readme_starts_with_the_set_up_commands():
         ['make demo', 'make test', 'make lint']
 
 
-def test_tutorial_client_runs_unchanged_but_for_the_import(tmp_path):
+def run_tutorial_client(directory: Path, *, client_env: Optional[dict] = None,
+                        server_env: Optional[dict] = None) -> str:
+    """Run the README's tutorial client against a guarded Fibonacci server; return its output.
+
+    ``client_env`` is the client's environment (default: this process's), ``server_env`` the
+    server's with the guard in ``LD_PRELOAD`` (default: :func:`cft_action.guard.environment`).
+    The client runs in ``directory``, where its script is written.
+    """
     source = readme_example('tutorial_client')
     assert 'from rclpy.action import ActionClient' not in source
-    script = tmp_path / 'tutorial_client.py'
+    script = directory / 'tutorial_client.py'
     script.write_text(source)
-    server = action_server('fibonacci', 0.01, env=guard.environment())
+    server = action_server('fibonacci', 0.01, env=server_env or guard.environment())
     try:
         run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
-                             timeout=60)
+                             timeout=60, cwd=directory, env=client_env)
     finally:
         server.stop()
     log = run.stdout + run.stderr
     assert run.returncode == 0, log
+    return log
+
+
+def check_tutorial_log(log: str) -> None:
+    """The tutorial's goal was accepted, gave its result and some of its feedback."""
     assert 'Goal accepted :)' in log, log
     assert 'Result: array' in log, log
     # The tutorial shuts down at its result: on a loaded machine, feedback still on its way then
     # (a lost sample is resent after the server's next heartbeat) is not delivered, as with rclpy.
     feedback = log.count('Received feedback: array')
     assert 1 <= feedback <= 10, log
+
+
+def test_tutorial_client_runs_unchanged_but_for_the_import(tmp_path):
+    check_tutorial_log(run_tutorial_client(tmp_path))
