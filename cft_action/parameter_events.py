@@ -74,7 +74,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.subscription import Subscription
 
 from cft_action._filtered_reader import FilteredReader
-from cft_action._rclpy_compat import set_parameter_event_callbacks
+from cft_action._rclpy_compat import PromptLogger, set_parameter_event_callbacks
 from cft_action.arrival import node_participant, participant_of, ServiceProbe
 from cft_action.errors import ContentFilterError
 from cft_action.filters import dds_literal, dds_literals, Literal, never_match_on
@@ -254,7 +254,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         self.qos_profile = qos_profile  # type: ignore[assignment]  # rclpy types it QoSProfile only
         self._rclpy_callbacks = set_parameter_event_callbacks(self)  # what its methods use
 
-        self._cft_logger = node.get_logger().get_child('cft_action')
+        self._cft_logger = PromptLogger(node.get_logger().get_child('cft_action'))
         # The reader's lock guards the filter bookkeeping and the rmw calls. It is never taken
         # while the Callbacks mutex is held, and the event path takes only _received_lock, so a
         # callback that reads the state cannot deadlock against an add or remove in another thread.
