@@ -17,9 +17,7 @@ STAMP := $(VENV)/.installed
 .PHONY: test lint demo bench clean
 
 # [jazzy] is ROS 2 Jazzy from PyPI, so that a machine without ROS needs nothing else.
-$(STAMP): pyproject.toml setup.py cft_action/_guard.c cft_action/_guard_filter.c cft_action/_guard.h \
-		cft_action/_guard_writer_qos.c \
-		cft_action/_reader_lock.c
+$(STAMP): pyproject.toml setup.py $(wildcard cft_action/*.c cft_action/*.h)
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[jazzy,test,bench,lint]'
 	touch $(STAMP)

@@ -28,9 +28,9 @@ import threading
 from typing import Any, ContextManager, NamedTuple, Optional, Sequence
 
 import rclpy
-from rclpy.impl.rcutils_logger import RcutilsLogger
 
 from cft_action import _rcl, sql
+from cft_action._rclpy_compat import PromptLogger
 from cft_action.errors import ContentFilterError
 from cft_action.filters import ContentFilterOptions, dds_literals, Literal
 
@@ -44,6 +44,19 @@ def set_filter(subscription_ptr: int, topic: str, expression: str,
     """Set a filter on an rcl subscription and verify that the rmw applies it.
 
     :return: the filter as set, its parameters quoted as DDS literals.
+    :raises ContentFilterError: naming the expression and the topic, with rcl's error string, if
+        the expression is empty, a parameter cannot be quoted, :mod:`cft_action.sql` rejects the
+        expression, rcl fails, or the rmw does not apply it.
+    """
+    return _set_filter(subscription_ptr, topic, expression, expression_parameters)[0]
+
+
+def _set_filter(subscription_ptr: int, topic: str, expression: str,
+                expression_parameters: Sequence[Literal] = (), *,
+                uuid_class: bool = False) -> tuple[ContentFilterOptions, Optional[int]]:
+    """:func:`set_filter`, optionally with the uuid filter class (:func:`_rcl.set_content_filter`).
+
+    :return: the filter as set, and the filter object it created in this process, if any.
     :raises ContentFilterError: naming the expression and the topic, with rcl's error string, if
         the expression is empty, a parameter cannot be quoted, :mod:`cft_action.sql` rejects the
         expression, rcl fails, or the rmw does not apply it.
@@ -67,14 +80,15 @@ def set_filter(subscription_ptr: int, topic: str, expression: str,
         raise ContentFilterError(f'{described} was rejected: {e.reason}') from e
     with _rcl_lock:
         try:
-            _rcl.set_content_filter(subscription_ptr, expression, parameters)
+            created = _rcl.set_content_filter(subscription_ptr, expression, parameters,
+                                              uuid_class=uuid_class)
         except ContentFilterError as e:
             raise ContentFilterError(f'{described} was rejected: {e.rcl_error}',
                                      function=e.function, ret=e.ret, rcl_error=e.rcl_error) from e
         if not _rcl.is_cft_enabled(subscription_ptr):
             raise ContentFilterError(f'{described} was accepted but is not applied by '
                                      f'{rclpy.get_rmw_implementation_identifier()}')
-    return ContentFilterOptions(expression, parameters)
+    return ContentFilterOptions(expression, parameters), created
 
 
 def get_filter(subscription_ptr: int) -> ContentFilterOptions:
@@ -123,10 +137,17 @@ class FilteredReader:
     :param unfiltered: what happens without the filter, for that warning, e.g.
         ``'feedback filter not used, all feedback is received as with rclpy'``.
     :param match_all: an expression that every sample of the topic matches.
+    :param uuid_class: filter with the library's own filter class (cft_action/_uuid_class.h),
+        which only a guarded server's writers know, instead of DDS-SQL, which every Fast DDS
+        writer evaluates; the expressions must then be goal_id.uuid filters.
     """
 
-    def __init__(self, logger: RcutilsLogger, *, unfiltered: str, match_all: str) -> None:
+    def __init__(self, logger: PromptLogger, *, unfiltered: str, match_all: str,
+                 uuid_class: bool = False) -> None:
         self.lock = threading.RLock()
+        self.uuid_class = uuid_class
+        self._created: Optional[int] = None  # the uuid filter object created in this process
+        self._reader_verdicts = 0
         self._topic = ''
         self._logger = logger
         self._unfiltered = unfiltered
@@ -153,7 +174,8 @@ class FilteredReader:
             self._topic = topic
             try:
                 with handle:
-                    self._filter = set_filter(subscription_ptr, self._topic, *options)
+                    self._filter, self._created = _set_filter(
+                        subscription_ptr, self._topic, *options, uuid_class=self.uuid_class)
             except ContentFilterError as e:
                 self.fall_back(f'installing the filter failed: {e}')
                 return False
@@ -180,7 +202,8 @@ class FilteredReader:
             if options == self._filter:
                 return False
             with self._handle:
-                self._filter = set_filter(self._pointer, self._topic, *options)
+                self._filter = _set_filter(self._pointer, self._topic, *options,
+                                           uuid_class=self.uuid_class)[0]
             self._updates += 1
             return True
 
@@ -200,7 +223,8 @@ class FilteredReader:
             if self._filter is not None and self._handle is not None:
                 try:
                     with self._handle:
-                        set_filter(self._pointer, self._topic, self._match_all)
+                        _set_filter(self._pointer, self._topic, self._match_all,
+                                    uuid_class=self.uuid_class)
                     self._updates += 1
                 except ContentFilterError as e:
                     reason += ('; and letting everything through failed too, samples may be '
@@ -217,6 +241,8 @@ class FilteredReader:
     def detach(self, reason: str) -> None:
         """The subscription is being destroyed: no call reaches it from now on."""
         with self.lock:
+            self._reader_verdicts = self.reader_verdicts or 0
+            self._created = None  # freed with the subscription's filtered topic
             self._filter, self._handle, self._reason, self._ended = None, None, reason, True
 
     # --- what it reports ------------------------------------------------------------------------
@@ -225,6 +251,17 @@ class FilteredReader:
     def filter(self) -> Optional[ContentFilterOptions]:
         """The filter in force, or None when the reader is not (or no longer) filtered."""
         return self._filter
+
+    @property
+    def reader_verdicts(self) -> Optional[int]:
+        """Samples that this process's uuid filter judged itself, which the writer did not filter.
+
+        None when unknown: not the uuid class, or its filter was created by the preloaded guard.
+        """
+        with self.lock:
+            if self._created is None:
+                return self._reader_verdicts if self._ended and self.uuid_class else None
+            return _rcl.uuid_filter_verdicts(self._created)
 
     @property
     def updates(self) -> int:

@@ -23,7 +23,7 @@
 //
 // It never aborts and prints nothing in the normal case (set CFT_GUARD_DEBUG=1 to see what it
 // does). It is only ever preloaded, never imported, and needs no Fast DDS headers.
-// Build by hand: cc -O2 -shared -fPIC -fvisibility=hidden -fexceptions -o libcftguard.so _guard.c -ldl -lpthread
+// Built by setup.py, with the other parts of the guard (_guard.h lists them).
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -39,6 +39,7 @@
 #include <unistd.h>
 
 #include "_guard.h"
+#include "_uuid_class.h"
 
 // ---- public state codes (mirrored in cft_action/guard.py) ---------------------------------------
 #define CFT_GUARD_ARMED 0        // preloaded; no Fast DDS resolved yet (none loaded, or not used)
@@ -49,13 +50,16 @@
 // ---- the interposed functions ---------------------------------------------------------------------
 // The first three are locked; the fourth, DDSFilterExpression::evaluate (a virtual member, whose
 // vtable slot is a relocation against its exported name), is where _guard_filter.c answers
-// uuid-only filters without deserializing the sample. Only Fast DDS 2.14 has it here.
-enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_COUNT = 4 };
+// uuid-only filters without deserializing the sample; the fifth,
+// DomainParticipantImpl::find_content_filter_factory, gives the writers the library's own filter
+// class (_uuid_class.h). Only Fast DDS 2.14 has the last two here.
+enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND = 4, FN_COUNT = 5 };
 
 // Fast DDS 2.x (libfastrtps), verified on 2.14.5 (ROS 2 Jazzy wheels).
 #define PCNC2 "_ZN8eprosima7fastdds3dds14DataWriterImpl25perform_create_new_changeENS_8fastrtps4rtps12ChangeKind_tEPvRNS4_11WriteParamsERKNS4_16InstanceHandle_tE"
 #define PRFI2 "_ZN8eprosima7fastdds3dds14DataWriterImpl26process_reader_filter_infoERKNS_8fastrtps4rtps6GUID_tERKNS4_15ReaderProxyDataE"
 #define RRF2 "_ZN8eprosima7fastdds3dds14DataWriterImpl20remove_reader_filterERKNS_8fastrtps4rtps6GUID_tE"
+#define FIND2 "_ZN8eprosima7fastdds3dds21DomainParticipantImpl27find_content_filter_factoryEPKc"
 #define EVAL2 "_ZNK8eprosima7fastdds3dds12DDSSQLFilter19DDSFilterExpression8evaluateERKNS_8fastrtps4rtps19SerializedPayload_tERKNS1_14IContentFilter16FilterSampleInfoERKNS5_6GUID_tE"
 
 // Fast DDS 3.x (libfastdds), verified on libfastdds.so.3.2 from the ROS 2 Kilted wheels.
@@ -85,14 +89,15 @@ struct family {
 };
 
 static struct family families[] = {
-  {"Fast DDS 2", "libfastrtps.so.2.14", "libfastrtps.so", {PCNC2, PRFI2, RRF2, EVAL2}, {0}, 0,
+  {"Fast DDS 2", "libfastrtps.so.2.14", "libfastrtps.so", {PCNC2, PRFI2, RRF2, EVAL2, FIND2}, {0}, 0,
    PTHREAD_MUTEX_INITIALIZER, ""},
-  {"Fast DDS 3", "libfastdds.so.3.2", "libfastdds.so", {PCNC3, PRFI3, RRF3, NULL}, {0}, 0,
+  {"Fast DDS 3", "libfastdds.so.3.2", "libfastdds.so", {PCNC3, PRFI3, RRF3, NULL, NULL}, {0}, 0,
    PTHREAD_MUTEX_INITIALIZER, ""},
 };
 #define N_FAMILIES ((int)(sizeof(families) / sizeof(families[0])))
 
 static unsigned long call_counts[FN_LOCKED];
+static unsigned long uuid_class_lookups, uuid_class_filters;  // cft_guard_uuid_class_count
 static unsigned long degraded_count;     // nested acquisitions that gave up (see lock_writer)
 static int loaded_after_fastdds;         // set by the constructor
 static char late_reason[512];
@@ -409,10 +414,43 @@ bool cft_evaluate2(const void *self, const void *payload, const void *sample_inf
   return real(self, payload, sample_info, reader_guid);
 }
 
+// The writers of a guarded server filter for readers of the library's class: every filter change
+// is locked here. Unguarded (an unknown Fast DDS), the class stays unknown to the server, which
+// then sends such readers everything, as to plain ones.
+CFT_EXPORT void *cft_find2(void *self, const char *class_name) __asm__(FIND2);
+void *cft_find2(void *self, const char *class_name) {
+  struct family *f = ready(0);
+  void *ours = cft_uuid_factory_for(class_name);
+  if (ours != NULL && f->state == CFT_GUARD_ACTIVE) {
+    __atomic_fetch_add(&uuid_class_lookups, 1, __ATOMIC_RELAXED);
+    return ours;
+  }
+  typedef void *(*find_fn)(void *, const char *);
+  find_fn real = (find_fn)f->real[FN_FIND];
+  if (real == NULL) {
+    missing(f, FN_FIND);
+    return NULL;
+  }
+  return real(self, class_name);
+}
+
+bool cft_uuid_class_may_create(void) { return true; }
+void cft_uuid_class_created(void *filter) {
+  (void)filter;
+  __atomic_fetch_add(&uuid_class_filters, 1, __ATOMIC_RELAXED);
+}
+
+// 0: lookups of the library's filter class answered; 1: filters of that class created (for the
+// writers and readers of this process).
+CFT_EXPORT unsigned long cft_guard_uuid_class_count(int which) {
+  return __atomic_load_n(which == 0 ? &uuid_class_lookups : &uuid_class_filters, __ATOMIC_RELAXED);
+}
+
 static void *our_definition(int fam, int fn) {
   static void *const ours[][FN_COUNT] = {
-    {(void *)cft_pcnc2, (void *)cft_prfi2, (void *)cft_rrf2, (void *)cft_evaluate2},
-    {(void *)cft_pcnc3, (void *)cft_prfi3, (void *)cft_rrf3, NULL},
+    {(void *)cft_pcnc2, (void *)cft_prfi2, (void *)cft_rrf2, (void *)cft_evaluate2,
+     (void *)cft_find2},
+    {(void *)cft_pcnc3, (void *)cft_prfi3, (void *)cft_rrf3, NULL, NULL},
   };
   return ours[fam][fn];
 }

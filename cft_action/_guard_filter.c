@@ -21,13 +21,7 @@
 // compiled here from the same property gives the same verdicts.
 //
 // Soundness rules:
-// - Only an expression this grammar accepts is compiled; anything else goes to Fast DDS:
-//     expr   := atom ( AND atom )*  |  atom ( OR atom )*        (one connective per level)
-//     atom   := term  |  '(' term ( AND term )* ')'
-//     term   := goal_id.uuid[I] = V  |  goal_id.uuid[I] = goal_id.uuid[I]
-//     I      := 0..15;   V := a decimal 0..255 without a leading zero, or %N naming such a parameter
-//   Fast DDS gives AND and OR the same precedence, left to right; a level with one connective
-//   means the same under any precedence.
+// - Only an expression in the grammar of _uuid_program.h is compiled; anything else goes to Fast DDS.
 // - Only for a reader of an action feedback topic (`rt/.../_action/feedback`) whose type is an
 //   action FeedbackMessage (`<pkg>::action::dds_::<Name>_FeedbackMessage_`), with filter class
 //   DDSSQL, and a sample in plain CDR (encapsulation 0x0000 or 0x0001) of at least 20 bytes.
@@ -47,6 +41,7 @@
 #include <string.h>
 
 #include "_guard.h"
+#include "_uuid_program.h"
 
 __thread const void *cft_filtering_writer;
 
@@ -91,187 +86,6 @@ static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_
 
 CFT_EXPORT unsigned long cft_guard_filter_count(int which) {
   return which >= 0 && which < C_COUNT ? __atomic_load_n(&counters[which], __ATOMIC_RELAXED) : 0;
-}
-
-// ---- the program ---------------------------------------------------------------------------------
-// One clause is a conjunction of byte equalities: it matches when (uuid & mask) == value.
-struct clause {
-  uint8_t mask[16];
-  uint8_t value[16];
-};
-struct program {
-  int count;   // clauses that can match; 0 matches nothing
-  struct clause clauses[];
-};
-
-static bool program_matches(const struct program *p, const uint8_t *uuid) {
-  uint64_t u0, u1;
-  memcpy(&u0, uuid, 8);
-  memcpy(&u1, uuid + 8, 8);
-  for (int i = 0; i < p->count; i++) {
-    uint64_t m0, m1, v0, v1;
-    memcpy(&m0, p->clauses[i].mask, 8);
-    memcpy(&m1, p->clauses[i].mask + 8, 8);
-    memcpy(&v0, p->clauses[i].value, 8);
-    memcpy(&v1, p->clauses[i].value + 8, 8);
-    if ((u0 & m0) == v0 && (u1 & m1) == v1) return true;
-  }
-  return false;
-}
-
-// ---- the parser ----------------------------------------------------------------------------------
-struct parser {
-  const char *at;
-  const char *const *params;
-  int param_count;
-};
-
-static void skip_space(struct parser *ps) {
-  while (*ps->at == ' ' || *ps->at == '\t' || *ps->at == '\n' || *ps->at == '\r') ps->at++;
-}
-
-static bool is_word_char(char c) {
-  return (c >= 'a' && c <= 'z') || (c >= 'A' && c <= 'Z') || (c >= '0' && c <= '9') || c == '_' ||
-         c == '.';
-}
-
-// A decimal 0..255 without a leading zero (Fast DDS reads 010 as octal), ending at a non-word
-// character. Advances *s past it.
-static bool byte_literal(const char **s, int *out) {
-  const char *p = *s;
-  if (*p < '0' || *p > '9') return false;
-  if (*p == '0' && p[1] >= '0' && p[1] <= '9') return false;
-  int v = 0;
-  while (*p >= '0' && *p <= '9') {
-    v = v * 10 + (*p - '0');
-    if (v > 255) return false;
-    p++;
-  }
-  if (is_word_char(*p)) return false;  // 1.5, 1e3, 12abc, 0x1f
-  *out = v;
-  *s = p;
-  return true;
-}
-
-static bool keyword(struct parser *ps, const char *word) {
-  size_t n = strlen(word);
-  if (strncmp(ps->at, word, n) != 0 || is_word_char(ps->at[n])) return false;
-  ps->at += n;
-  return true;
-}
-
-// `goal_id.uuid[I]`; sets *index.
-static bool uuid_field(struct parser *ps, int *index) {
-  static const char field[] = "goal_id.uuid[";
-  if (strncmp(ps->at, field, sizeof field - 1) != 0) return false;
-  const char *p = ps->at + sizeof field - 1;
-  int i;
-  if (!byte_literal(&p, &i) || *p != ']' || i > 15) return false;
-  ps->at = p + 1;
-  *index = i;
-  return true;
-}
-
-// One term, ANDed into *c; sets *never when the clause became a contradiction.
-static bool term(struct parser *ps, struct clause *c, bool *never) {
-  int index, value;
-  skip_space(ps);
-  if (!uuid_field(ps, &index)) return false;
-  skip_space(ps);
-  if (*ps->at != '=' || ps->at[1] == '=') return false;
-  ps->at++;
-  skip_space(ps);
-  int other;
-  if (uuid_field(ps, &other)) {
-    return other == index;  // a field equals itself: no constraint; two fields: not handled here
-  }
-  if (*ps->at == '%') {
-    const char *p = ps->at + 1;
-    int n;
-    if (!byte_literal(&p, &n) || n >= ps->param_count) return false;  // %0..%99 are below 256
-    const char *param = ps->params[n];
-    if (!byte_literal(&param, &value) || *param != '\0') return false;
-    ps->at = p;
-  } else if (!byte_literal(&ps->at, &value)) {
-    return false;
-  }
-  if (c->mask[index] != 0 && c->value[index] != (uint8_t)value) *never = true;
-  c->mask[index] = 0xff;
-  c->value[index] = (uint8_t)value;
-  return true;
-}
-
-// An atom: a term, or a parenthesized conjunction of terms. ANDs into *c.
-static bool atom(struct parser *ps, struct clause *c, bool *never) {
-  skip_space(ps);
-  if (*ps->at != '(') return term(ps, c, never);
-  ps->at++;
-  if (!term(ps, c, never)) return false;
-  for (;;) {
-    skip_space(ps);
-    if (*ps->at == ')') { ps->at++; return true; }
-    if (!keyword(ps, "AND")) return false;
-    if (!term(ps, c, never)) return false;
-  }
-}
-
-// Appends `c` to *p, growing it; false when out of memory (*p is then still valid).
-static bool append_clause(struct program **p, int *capacity, const struct clause *c) {
-  if ((*p)->count == *capacity) {
-    struct program *grown = realloc(*p, sizeof **p + (size_t)(*capacity * 2) * sizeof c[0]);
-    if (grown == NULL) return false;
-    *p = grown;
-    *capacity *= 2;
-  }
-  (*p)->clauses[(*p)->count++] = *c;
-  return true;
-}
-
-// Compiles `expression` with `params`, or returns NULL when it is not uuid-only in this grammar.
-static struct program *compile(const char *expression, const char *const *params, int param_count) {
-  struct parser ps = {expression, params, param_count};
-  int capacity = 8;
-  struct program *p = calloc(1, sizeof *p + (size_t)capacity * sizeof p->clauses[0]);
-  if (p == NULL) return NULL;
-  struct clause current;
-  memset(&current, 0, sizeof current);
-  bool never = false;
-  enum { NONE, ALL_AND, ALL_OR } connective = NONE;
-  if (!atom(&ps, &current, &never)) goto unsupported;
-  for (;;) {
-    skip_space(&ps);
-    if (*ps.at == '\0') break;
-    if (connective != ALL_OR && keyword(&ps, "AND")) {
-      connective = ALL_AND;
-      if (!atom(&ps, &current, &never)) goto unsupported;
-      continue;
-    }
-    if (connective != ALL_AND && keyword(&ps, "OR")) {
-      connective = ALL_OR;
-      if (!never && !append_clause(&p, &capacity, &current)) goto unsupported;
-      memset(&current, 0, sizeof current);
-      never = false;
-      if (!atom(&ps, &current, &never)) goto unsupported;
-      continue;
-    }
-    goto unsupported;  // another token, or a second kind of connective on this level
-  }
-  if (!never && !append_clause(&p, &capacity, &current)) goto unsupported;
-  return p;
-unsupported:
-  free(p);
-  return NULL;
-}
-
-// Exported for the grammar test: 1 if `expression` compiles and `uuid` matches, 0 if it compiles
-// and does not, -1 if it is not compiled (Fast DDS would be asked).
-CFT_EXPORT int cft_guard_filter_try(const char *expression, const char *const *params,
-                                    int param_count, const uint8_t *uuid) {
-  struct program *p = compile(expression, params, param_count);
-  if (p == NULL) return -1;
-  int verdict = program_matches(p, uuid);
-  free(p);
-  return verdict;
 }
 
 // ---- reading the reader's discovery data -----------------------------------------------------------
@@ -345,7 +159,7 @@ static struct program *program_of(const uint8_t *info, bool *filtered) {
   struct program *program = NULL;
   if (strcmp(class_name, "DDSSQL") == 0 && strncmp(related, "rt/", 3) == 0 &&
       ends_with(related, "/_action/feedback") && is_feedback_type(type))
-    program = compile(expression, params, param_count);
+    program = cft_uuid_compile(expression, params, param_count);
   if (cft_debug_enabled())
     cft_say("reader filter on %s (%s, %s): %s: %.200s", related, type, class_name,
             program ? "uuid verdicts" : "left to Fast DDS", expression);
@@ -474,7 +288,7 @@ static int uuid_verdict(const void *self, const void *payload, const void *reade
   if (e != NULL) {
     if (e->instance == NULL) e->instance = self;
     if (e->instance == self) {
-      verdict = program_matches(e->program, data + 4);
+      verdict = cft_uuid_matches(e->program, data + 4);
     } else {
       clear_locked(e);
       count(C_FOREIGN);

@@ -20,14 +20,13 @@
 // takes no reader mutex, so the lock order cannot cycle.
 #define _GNU_SOURCE
 #include <dlfcn.h>
-#include <link.h>
 #include <pthread.h>
 #include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
-#include <sys/mman.h>
-#include <unistd.h>
+
+#include "_patch.h"
 
 #define EXPORT __attribute__((visibility("default")))
 
@@ -96,46 +95,6 @@ static int fail(int status, const char *what, const char *detail) {
   return status;
 }
 
-// The protection of the page at addr, from /proc/self/maps (vtables sit in RELRO: read-only).
-static int page_protection(uintptr_t addr) {
-  FILE *maps = fopen("/proc/self/maps", "r");
-  if (maps == NULL) return -1;
-  char line[512];
-  int prot = -1;
-  while (prot < 0 && fgets(line, sizeof line, maps)) {
-    unsigned long start, end;
-    char perms[5];
-    if (sscanf(line, "%lx-%lx %4s", &start, &end, perms) == 3 && addr >= start && addr < end)
-      prot = (perms[0] == 'r' ? PROT_READ : 0) | (perms[1] == 'w' ? PROT_WRITE : 0) |
-             (perms[2] == 'x' ? PROT_EXEC : 0);
-  }
-  fclose(maps);
-  return prot;
-}
-
-// Replace every slot of the vtable named `vtable` that holds `from` with `to`; the count.
-static int patch_vtable(void *library, const char *vtable, void *from, void *to) {
-  void *table = dlsym(library, vtable);
-  Dl_info info;
-  const ElfW(Sym) *symbol = NULL;
-  if (table == NULL || !dladdr1(table, &info, (void **)&symbol, RTLD_DL_SYMENT) || !symbol)
-    return -1;
-  void **slots = table;
-  size_t count = symbol->st_size / sizeof(void *);
-  long page = sysconf(_SC_PAGESIZE);
-  int patched = 0;
-  for (size_t i = 0; i < count; i++) {
-    if (slots[i] != from) continue;
-    uintptr_t start = (uintptr_t)&slots[i] & ~(uintptr_t)(page - 1);
-    int prot = page_protection((uintptr_t)&slots[i]);
-    if (prot < 0 || mprotect((void *)start, page, prot | PROT_WRITE) != 0) return -1;
-    __atomic_store_n(&slots[i], to, __ATOMIC_RELEASE);
-    if (!(prot & PROT_WRITE)) mprotect((void *)start, page, prot);
-    patched++;
-  }
-  return patched;
-}
-
 static int install_locked(void) {
   void *library = dlopen(FASTRTPS_SONAME, RTLD_NOW | RTLD_NOLOAD);
   if (library == NULL) return fail(-1, FASTRTPS_SONAME " is not loaded", dlerror());
@@ -144,11 +103,11 @@ static int install_locked(void) {
   real_create = (create_fn)dlsym(library, CREATE_FILTER);
   if (!real_is_relevant || !real_is_relevant_thunk || !real_create)
     return fail(-2, "a member is not exported by " FASTRTPS_SONAME, dlerror());
-  int creates = patch_vtable(library, FACTORY_VTABLE, (void *)real_create, (void *)locked_create);
+  int creates = cft_patch_vtable(library, FACTORY_VTABLE, (void *)real_create, (void *)locked_create);
   if (creates < 1) return fail(-3, "no create_content_filter slot in", FACTORY_VTABLE);
-  int entries = patch_vtable(library, CFT_VTABLE, (void *)real_is_relevant,
+  int entries = cft_patch_vtable(library, CFT_VTABLE, (void *)real_is_relevant,
                              (void *)locked_is_relevant);
-  int thunks = patch_vtable(library, CFT_VTABLE, (void *)real_is_relevant_thunk,
+  int thunks = cft_patch_vtable(library, CFT_VTABLE, (void *)real_is_relevant_thunk,
                             (void *)locked_is_relevant_thunk);
   if (thunks < 1 || entries < 0) return fail(-4, "no is_relevant slot in", CFT_VTABLE);
   return 0;

@@ -29,17 +29,26 @@ from unique_identifier_msgs.msg import UUID
 
 from cft_action import _rcl
 from cft_action._filtered_reader import FilteredReader
-from cft_action._rclpy_compat import CompatActionClient
+from cft_action._rclpy_compat import CompatActionClient, PromptLogger
 from cft_action.arrival import node_participant, participant_of, ServiceProbe
 from cft_action.errors import InvalidArgumentError
 from cft_action.filters import ContentFilterOptions, MATCH_ALL
 from cft_action.goal_filter import ExpressionTooLong, GoalFilterPlan, MODES, random_uuid4
 from cft_action.subscription import is_content_filter_supported
 
-__all__ = ['ActionClient', 'FeedbackFilterState', 'FEEDBACK_FILTER_ENV']
+__all__ = ['ActionClient', 'FeedbackFilterState', 'FEEDBACK_FILTER_ENV', 'WRITER_FILTERING_ENV',
+           'WRITER_FILTERING']
 
 #: Environment variable with which operators override the ``feedback_filter`` argument.
 FEEDBACK_FILTER_ENV = 'CFT_ACTION_FEEDBACK_FILTER'
+
+#: Environment variable with which operators override the ``writer_filtering`` argument.
+WRITER_FILTERING_ENV = 'CFT_ACTION_WRITER_FILTERING'
+
+#: Which servers' writers may filter: ``'guarded'`` (the default), only those run under
+#: ``cft-action guard``, which know the library's filter class; ``'any'``, every Fast DDS writer,
+#: with a DDS-SQL filter, which costs an unguarded server time and can crash it (docs/SAFETY.md).
+WRITER_FILTERING = ('guarded', 'any')
 
 _TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
                        GoalStatus.STATUS_ABORTED})
@@ -87,6 +96,11 @@ class FeedbackFilterState(NamedTuple):
     :ivar held_goals: goal requests that were held for that proof, since construction.
     :ivar arrival_timeouts: times the proof did not come within ``FILTER_ARRIVAL_TIMEOUT`` and the
         held goals were sent without it.
+    :ivar filtered_in: where other goals' feedback is dropped: ``'writer'`` (the server's writer
+        does not send it: a guarded server, or ``writer_filtering='any'``), ``'reader'`` (it
+        crosses the network and this client's DDS reader drops it before Python: an unguarded
+        server), ``'none'`` (not filtered: rclpy drops it in Python), or ``'unknown'`` (no
+        feedback has arrived yet to tell).
     """
 
     mode: str
@@ -100,6 +114,7 @@ class FeedbackFilterState(NamedTuple):
     confirmed: bool = True
     held_goals: int = 0
     arrival_timeouts: int = 0
+    filtered_in: str = 'unknown'
 
 
 class _HeldGoal(NamedTuple):
@@ -128,6 +143,16 @@ def _forward(source: Future, target: Future) -> None:
     source.add_done_callback(done)
 
 
+def _resolve_writer_filtering(writer_filtering: str) -> str:
+    value = os.environ.get(WRITER_FILTERING_ENV) or writer_filtering
+    if value not in WRITER_FILTERING:
+        source = (f'environment variable {WRITER_FILTERING_ENV}'
+                  if os.environ.get(WRITER_FILTERING_ENV) else 'writer_filtering')
+        raise InvalidArgumentError(
+            f'{source}={value!r}: expected one of {", ".join(WRITER_FILTERING)}')
+    return value
+
+
 def _resolve_mode(feedback_filter: Optional[str], optimization: Optional[bool]) -> str:
     from_env = os.environ.get(FEEDBACK_FILTER_ENV)
     if optimization is not None:
@@ -150,6 +175,7 @@ class ActionClient(CompatActionClient):
     def __init__(self, node: Node, action_type: Any, action_name: str, *,
                  feedback_filter: Optional[str] = None,
                  enable_feedback_msg_optimization: Optional[bool] = None,
+                 writer_filtering: str = 'guarded',
                  **kwargs: Any) -> None:
         """
         Create an ActionClient.
@@ -175,18 +201,29 @@ class ActionClient(CompatActionClient):
             filter (rclpy 10, Lyrical), accepted so that code moves between distros: ``True``
             means ``feedback_filter='client'`` unless another filtering mode is given, ``False``
             means ``'off'``. Unlike there, filtering is on when neither is given.
+        :param writer_filtering: Which servers may filter on their side. ``'guarded'`` (default):
+            the filter uses the library's own filter class, which only a server run under
+            ``cft-action guard`` knows; any other server sends this client all feedback, as to a
+            plain client, and this client's DDS reader drops other goals' feedback before Python.
+            ``'any'``: a DDS-SQL filter that every Fast DDS server evaluates, which costs an
+            unguarded server time per sample and filtered client, and exposes it to
+            Fast-DDS#4878 (docs/SAFETY.md). The environment variable
+            ``CFT_ACTION_WRITER_FILTERING`` overrides it.
         :param kwargs: ``callback_group``, ``goal_service_qos_profile``,
             ``result_service_qos_profile``, ``cancel_service_qos_profile``,
             ``feedback_sub_qos_profile`` and ``status_sub_qos_profile``, as for rclpy.
-        :raises ValueError: if ``feedback_filter`` or the environment variable names no mode, or
-            ``enable_feedback_msg_optimization`` contradicts ``feedback_filter``.
+        :raises ValueError: if ``feedback_filter``, ``writer_filtering`` or their environment
+            variables name no known value, or ``enable_feedback_msg_optimization`` contradicts
+            ``feedback_filter``.
         """
         mode = _resolve_mode(feedback_filter, enable_feedback_msg_optimization)
-        self._cft_logger = node.get_logger().get_child('cft_action')
+        self._writer_filtering = _resolve_writer_filtering(writer_filtering)
+        self._cft_logger = PromptLogger(node.get_logger().get_child('cft_action'))
         self._mode = mode
         self._reader = FilteredReader(
-            self._cft_logger, match_all=MATCH_ALL,
+            self._cft_logger, match_all=MATCH_ALL, uuid_class=self._writer_filtering == 'guarded',
             unfiltered='feedback filter not used, all feedback is received as with rclpy')
+        self._logged_unguarded = False
         self._plan: Optional[GoalFilterPlan] = None  # None: the filter is not (or no longer) used
         self._install_ran = False
         self._finished: dict[bytes, float] = {}  # goal UUID -> when it finished
@@ -318,7 +355,29 @@ class ActionClient(CompatActionClient):
                 live_goals=self._plan.live_goals if self._plan else 0,
                 feedback_taken=self._feedback_taken, feedback_dropped=self._feedback_dropped,
                 confirmed=self._plan is None or self._needed_revision() <= self._confirmed_revision,
-                held_goals=self._held_goals, arrival_timeouts=self._arrival_timeouts)
+                held_goals=self._held_goals, arrival_timeouts=self._arrival_timeouts,
+                filtered_in=self._filtered_in())
+
+    def _filtered_in(self) -> str:
+        """Where other goals' feedback is dropped; see :class:`FeedbackFilterState`."""
+        if self._reader.filter is None:
+            return 'none'
+        if not self._reader.uuid_class:
+            return 'writer'  # DDS-SQL: every Fast DDS writer filters (up to its reader limit)
+        verdicts = self._reader.reader_verdicts
+        if verdicts is None:
+            return 'unknown'
+        if verdicts:
+            if not self._logged_unguarded:
+                self._logged_unguarded = True
+                self._cft_logger.info(
+                    "the action server's writer does not filter this client's feedback (the server "
+                    "does not run under 'cft-action guard'): other goals' feedback crosses the "
+                    "network to this client and its DDS reader drops it before Python. Under the "
+                    'guard the server would not send it (docs/BENCHMARKS.md, "Bytes per client")')
+            return 'reader'
+        return 'writer' if self._feedback_taken else 'unknown'
+
 
     def new_goal_uuid(self) -> UUID:
         """
@@ -544,6 +603,9 @@ class ActionClient(CompatActionClient):
         feedback = data.get('feedback')
         if feedback is not None:
             self._feedback_taken += 1
+            if not self._logged_unguarded and self._feedback_taken <= 100:
+                with self._reader.lock:
+                    self._filtered_in()  # logs once when the server turns out unguarded
             goal_uuid = bytes(feedback.goal_id.uuid)
             if (goal_uuid not in self._cft_feedback_callbacks
                     or self._published_after_result(goal_uuid, stamp)):

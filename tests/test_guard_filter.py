@@ -159,14 +159,14 @@ def test_the_layout_is_that_of_the_installed_fast_dds_headers(tmp_path: Path) ->
 
 def guard_try(library: ctypes.CDLL, expression: str, params: list[str], uuid: bytes) -> int:
     array = (ctypes.c_char_p * max(1, len(params)))(*[p.encode() for p in params])
-    return library.cft_guard_filter_try(expression.encode(), array, len(params), uuid)
+    return library.cft_uuid_filter_try(expression.encode(), array, len(params), uuid)
 
 
 @pytest.mark.parametrize('expression, params, own', CORPUS, ids=CORPUS_IDS)
 def test_compiled_verdicts_equal_the_sql_evaluator(expression: str, params: list[str],
                                                    own: bool) -> None:
     library = guard_library()
-    library.cft_guard_filter_try.restype = ctypes.c_int
+    library.cft_uuid_filter_try.restype = ctypes.c_int
     compiled = sql.compile_filter(expression, params, SCHEMA)
     rng = random.Random(expression)
     for uuid in uuids() + [rng.randbytes(16) for _ in range(200)]:

@@ -1,0 +1,104 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The CFT_ACTION_UUID class (_uuid_class.h) in a client's process, where cft_action is loaded with
+// ctypes after Fast DDS, so nothing can be preloaded. Two PLT slots of libfastrtps are redirected:
+// - DomainParticipantImpl::find_content_filter_factory answers the class with this library's
+//   factory (unless the slot is already redirected: the guard is preloaded and answers it);
+// - DomainParticipantImpl::create_contentfilteredtopic, which rmw_fastrtps reaches through
+//   DomainParticipant's four-argument overload with the class DDSSQL, takes CFT_ACTION_UUID
+//   instead on a thread inside cft_uuid_class_begin/end.
+// The factory creates filters only on such a thread: those are the process's own readers. A writer
+// of this process that discovers a reader with this class gets no filter for it (the factory says
+// unsupported), so it sends that reader everything and filters nothing, unguarded.
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <pthread.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "_patch.h"
+#include "_uuid_class.h"
+
+#define EXPORT __attribute__((visibility("default")))
+
+#define FASTRTPS_SONAME "libfastrtps.so.2.14"
+#define FIND "_ZN8eprosima7fastdds3dds21DomainParticipantImpl27find_content_filter_factoryEPKc"
+#define CREATE_CFT                                                                               \
+  "_ZN8eprosima7fastdds3dds21DomainParticipantImpl27create_contentfilteredtopicERKNSt7__cxx1112" \
+  "basic_stringIcSt11char_traitsIcESaIcEEEPNS1_5TopicESA_RKSt6vectorIS8_SaIS8_EEPKc"
+
+typedef void *(*find_fn)(void *self, const char *class_name);
+typedef void *(*create_cft_fn)(void *self, const void *name, void *related_topic,
+                               const void *expression, const void *parameters,
+                               const char *class_name);
+
+static find_fn real_find;
+static create_cft_fn real_create_cft;
+static __thread int in_request;       // inside cft_uuid_class_begin/end
+static __thread void *created;        // the filter the factory created last on this thread
+static pthread_mutex_t install_mutex = PTHREAD_MUTEX_INITIALIZER;
+static int install_status = 1;        // 1: not tried; 0: ours; 2: the guard answers; < 0: failed
+static char install_error[256];
+
+bool cft_uuid_class_may_create(void) { return in_request; }
+void cft_uuid_class_created(void *filter) { created = filter; }
+
+static void *find(void *self, const char *class_name) {
+  void *factory = cft_uuid_factory_for(class_name);
+  return factory != NULL ? factory : real_find(self, class_name);
+}
+
+static void *create_cft(void *self, const void *name, void *related_topic, const void *expression,
+                        const void *parameters, const char *class_name) {
+  return real_create_cft(self, name, related_topic, expression, parameters,
+                         in_request ? CFT_UUID_CLASS : class_name);
+}
+
+static int fail(int status, const char *what, const char *detail) {
+  snprintf(install_error, sizeof install_error, "%s: %s", what, detail ? detail : "");
+  return status;
+}
+
+static int install_locked(void) {
+  void *library = dlopen(FASTRTPS_SONAME, RTLD_NOW | RTLD_NOLOAD);
+  if (library == NULL) return fail(-1, FASTRTPS_SONAME " is not loaded", dlerror());
+  real_find = (find_fn)dlsym(library, FIND);
+  real_create_cft = (create_cft_fn)dlsym(library, CREATE_CFT);
+  if (real_find == NULL || real_create_cft == NULL)
+    return fail(-2, "a member is not exported by " FASTRTPS_SONAME, dlerror());
+  int found = cft_patch_got(FASTRTPS_SONAME, FIND, (void *)real_find, (void *)find);
+  if (found < 0) return fail(-3, "no PLT slot in " FASTRTPS_SONAME " for", FIND);
+  if (cft_patch_got(FASTRTPS_SONAME, CREATE_CFT, (void *)real_create_cft, (void *)create_cft) != 1)
+    return fail(-4, "no PLT slot in " FASTRTPS_SONAME " for", CREATE_CFT);
+  return found == 1 ? 0 : 2;
+}
+
+// 0 once this library answers the class, 2 if the preloaded guard does, < 0 if neither can be
+// arranged (cft_uuid_class_error says why). Later calls return the first result.
+EXPORT int cft_uuid_class_install(void) {
+  pthread_mutex_lock(&install_mutex);
+  if (install_status == 1) install_status = install_locked();
+  int status = install_status;
+  pthread_mutex_unlock(&install_mutex);
+  return status;
+}
+
+EXPORT const char *cft_uuid_class_error(void) { return install_error; }
+
+// Around one rcl content-filter call for a reader that is to use the class.
+EXPORT void cft_uuid_class_begin(void) {
+  in_request = 1;
+  created = NULL;
+}
+
+// Ends the request; returns the filter this library created in it (new readers only), or NULL.
+EXPORT void *cft_uuid_class_end(void) {
+  in_request = 0;
+  void *filter = created;
+  created = NULL;
+  return filter;
+}
+
+EXPORT unsigned long cft_uuid_class_verdicts(const void *filter) {
+  return filter != NULL ? cft_uuid_filter_verdicts(filter) : 0;
+}

@@ -1,0 +1,114 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The CFT_ACTION_UUID filter class (see _uuid_class.h): Fast DDS 2.14's IContentFilterFactory and
+// IContentFilter, as C objects whose first word is a vtable. Both interfaces declare only pure
+// virtual members (no virtual destructor), so under the Itanium C++ ABI their vtables are exactly:
+//   IContentFilterFactory: { create_content_filter, delete_content_filter }
+//   IContentFilter:        { evaluate }
+// tests/test_uuid_class.py checks this against the installed headers. ReturnCode_t is a trivially
+// copyable class of one uint32_t, returned in eax; references are pointers.
+#define _GNU_SOURCE
+#include <pthread.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "_uuid_class.h"
+#include "_uuid_program.h"
+
+#define RETCODE_OK 0u
+#define RETCODE_UNSUPPORTED 2u
+#define RETCODE_BAD_PARAMETER 3u
+#define RETCODE_OUT_OF_RESOURCES 5u
+
+// SerializedPayload_t (public header, fastdds/rtps/common/SerializedPayload.h): uint16_t
+// encapsulation, uint32_t length, octet *data.
+#define PAYLOAD_LENGTH 4
+#define PAYLOAD_DATA 8
+// The CDR encapsulation header, then FeedbackMessage.goal_id.uuid: 16 octets, with no padding.
+#define UUID_OFFSET 4
+
+struct uuid_filter {
+  const void *const *vtable;
+  pthread_rwlock_t lock;  // the program may be replaced while a receive thread evaluates
+  struct program *program;
+  unsigned long verdicts;
+};
+
+// A sample that is not a plain CDR FeedbackMessage is passed on: the client's own UUID check,
+// rclpy's, then drops it if it is foreign, as it would for a plain client.
+static bool filter_evaluate(const struct uuid_filter *self, const uint8_t *payload,
+                            const void *sample_info, const void *reader_guid) {
+  (void)sample_info;
+  (void)reader_guid;
+  uint32_t length;
+  const uint8_t *data;
+  memcpy(&length, payload + PAYLOAD_LENGTH, sizeof length);
+  memcpy(&data, payload + PAYLOAD_DATA, sizeof data);
+  struct uuid_filter *filter = (struct uuid_filter *)self;
+  __atomic_fetch_add(&filter->verdicts, 1, __ATOMIC_RELAXED);
+  // Encapsulation 0x0000 (CDR, big endian) or 0x0001 (CDR, little endian): octets are unaffected.
+  if (data == NULL || length < UUID_OFFSET + 16 || data[0] != 0 || data[1] > 1) return true;
+  pthread_rwlock_rdlock(&filter->lock);
+  bool match = cft_uuid_matches(filter->program, data + UUID_OFFSET);
+  pthread_rwlock_unlock(&filter->lock);
+  return match;
+}
+
+static const void *const filter_vtable[] = {(const void *)filter_evaluate};
+
+// filter_parameters is not read: this class takes no parameters, so a %N in the expression does
+// not compile (cft_uuid_compile with no parameters).
+static uint32_t factory_create(void *self, const char *class_name, const char *type_name,
+                               const void *data_type, const char *expression,
+                               const void *filter_parameters, void **filter_instance) {
+  (void)self, (void)class_name, (void)type_name, (void)data_type, (void)filter_parameters;
+  struct uuid_filter *existing = *filter_instance;
+  if (expression == NULL) return existing != NULL ? RETCODE_OK : RETCODE_BAD_PARAMETER;
+  if (existing == NULL && !cft_uuid_class_may_create()) return RETCODE_UNSUPPORTED;
+  struct program *program = cft_uuid_compile(expression, NULL, 0);
+  if (program == NULL) return RETCODE_BAD_PARAMETER;
+  if (existing != NULL) {  // an update in place: Fast DDS hands back only this factory's filters
+    pthread_rwlock_wrlock(&existing->lock);
+    struct program *old = existing->program;
+    existing->program = program;
+    pthread_rwlock_unlock(&existing->lock);
+    free(old);
+    return RETCODE_OK;
+  }
+  struct uuid_filter *filter = calloc(1, sizeof *filter);
+  if (filter == NULL) {
+    free(program);
+    return RETCODE_OUT_OF_RESOURCES;
+  }
+  filter->vtable = filter_vtable;
+  pthread_rwlock_init(&filter->lock, NULL);
+  filter->program = program;
+  *filter_instance = filter;
+  cft_uuid_class_created(filter);
+  return RETCODE_OK;
+}
+
+static uint32_t factory_delete(void *self, const char *class_name, void *filter_instance) {
+  (void)self, (void)class_name;
+  struct uuid_filter *filter = filter_instance;
+  if (filter == NULL) return RETCODE_BAD_PARAMETER;
+  pthread_rwlock_destroy(&filter->lock);
+  free(filter->program);
+  free(filter);
+  return RETCODE_OK;
+}
+
+static const void *const factory_vtable[] = {(const void *)factory_create,
+                                            (const void *)factory_delete};
+static struct {
+  const void *const *vtable;
+} factory = {factory_vtable};
+
+void *cft_uuid_factory_for(const char *class_name) {
+  return class_name != NULL && strcmp(class_name, CFT_UUID_CLASS) == 0 ? (void *)&factory : NULL;
+}
+
+unsigned long cft_uuid_filter_verdicts(const void *filter) {
+  return __atomic_load_n(&((const struct uuid_filter *)filter)->verdicts, __ATOMIC_RELAXED);
+}
