@@ -28,6 +28,8 @@
 // The CDR encapsulation header, then FeedbackMessage.goal_id.uuid: 16 octets, with no padding.
 #define UUID_OFFSET 4
 
+static unsigned long total_verdicts;  // of every filter of this library, for cft_uuid_class_total
+
 struct uuid_filter {
   const void *const *vtable;
   pthread_rwlock_t lock;  // the program may be replaced while a receive thread evaluates
@@ -47,6 +49,7 @@ static bool filter_evaluate(const struct uuid_filter *self, const uint8_t *paylo
   memcpy(&data, payload + PAYLOAD_DATA, sizeof data);
   struct uuid_filter *filter = (struct uuid_filter *)self;
   __atomic_fetch_add(&filter->verdicts, 1, __ATOMIC_RELAXED);
+  __atomic_fetch_add(&total_verdicts, 1, __ATOMIC_RELAXED);
   // Encapsulation 0x0000 (CDR, big endian) or 0x0001 (CDR, little endian): octets are unaffected.
   if (data == NULL || length < UUID_OFFSET + 16 || data[0] != 0 || data[1] > 1) return true;
   pthread_rwlock_rdlock(&filter->lock);
@@ -111,4 +114,8 @@ void *cft_uuid_factory_for(const char *class_name) {
 
 unsigned long cft_uuid_filter_verdicts(const void *filter) {
   return __atomic_load_n(&((const struct uuid_filter *)filter)->verdicts, __ATOMIC_RELAXED);
+}
+
+unsigned long cft_uuid_class_total_verdicts(void) {
+  return __atomic_load_n(&total_verdicts, __ATOMIC_RELAXED);
 }

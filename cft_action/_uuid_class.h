@@ -36,4 +36,7 @@ void cft_uuid_class_created(void *filter);
 // How many verdicts `filter` has given since it was created.
 unsigned long cft_uuid_filter_verdicts(const void *filter);
 
+// How many verdicts every filter of this library has given.
+unsigned long cft_uuid_class_total_verdicts(void);
+
 #endif  // CFT_ACTION_UUID_CLASS_H_

@@ -367,8 +367,11 @@ class ActionClient(CompatActionClient):
         verdicts = self._reader.reader_verdicts
         if verdicts is None:
             return 'unknown'
-        if verdicts:
-            if not self._logged_unguarded:
+        # A guarded writer marks what it sends, so the reader judges only the samples sent in
+        # the moment between a filter change here and its arrival there; an unguarded one marks
+        # nothing, and the reader judges every sample, other goals' included.
+        if verdicts and verdicts >= self._feedback_taken:
+            if verdicts >= 10 and not self._logged_unguarded:
                 self._logged_unguarded = True
                 self._cft_logger.info(
                     "the action server's writer does not filter this client's feedback (the server "

@@ -1,0 +1,84 @@
+"""The client of issue 18's scenario: a burst of goals sent before the first spin.
+
+Usage: ``python -m tests.helpers.burst_client ACTION MODE STALL_S``
+
+Right after ``wait_for_server``, without spinning, it sends 6 goals with generated UUIDs and a
+feedback callback, 1 with a caller-supplied random ``goal_uuid`` and a feedback callback, and 1
+without a feedback callback; then it spins until every answered goal has its result and prints
+``RESULT <json>``: per goal with a callback, the feedback indices received, and whether it was
+answered. The feedback queue keeps the last 20 messages, as a deep-enough queue would.
+
+STALL_S makes every call of rclpy's logger caller lookup (``_find_caller``, which takes 50-165 ms
+on its first call in a process) take that many seconds longer, so that a client that logs through
+rclpy while it sends goals certainly stalls its executor past what the queue holds.
+"""
+
+import json
+import sys
+import time
+import uuid
+
+import rclpy
+import rclpy.impl.rcutils_logger as rcutils_logger
+from rclpy.node import Node
+from rclpy.qos import QoSProfile
+from test_msgs.action import Fibonacci
+from unique_identifier_msgs.msg import UUID
+
+from cft_action import ActionClient
+
+DEPTH = 20
+ORDER = 10
+
+
+def slowed(stall_s):
+    find_caller = rcutils_logger._find_caller
+
+    def find_caller_slowly(frame):
+        time.sleep(stall_s)
+        return find_caller(frame)
+    return find_caller_slowly
+
+
+def main() -> None:
+    action, mode, stall_s = sys.argv[1], sys.argv[2], float(sys.argv[3])
+    rclpy.init()
+    node = Node(f'cft_burst_client_{uuid.uuid4().hex[:8]}')
+    client = ActionClient(node, Fibonacci, action, feedback_filter=mode,
+                          feedback_sub_qos_profile=QoSProfile(depth=DEPTH))
+    if not client.wait_for_server(timeout_sec=20):
+        print('NO SERVER', flush=True)
+        return
+    rcutils_logger._find_caller = slowed(stall_s)
+    received: dict[str, list[int]] = {}
+
+    def on_feedback(key):
+        return lambda msg: received[key].append(msg.feedback.sequence[0])
+
+    sends = []
+    for i in range(8):
+        key = f'goal{i}'
+        received[key] = []
+        goal_uuid = UUID(uuid=list(uuid.uuid4().bytes)) if i == 6 else None
+        callback = on_feedback(key) if i < 7 else None
+        sends.append((key, client.send_goal_async(Fibonacci.Goal(order=ORDER), callback,
+                                                  goal_uuid)))
+    deadline = time.monotonic() + 60
+    results = {}
+    while time.monotonic() < deadline:
+        rclpy.spin_once(node, timeout_sec=0.05)
+        for key, future in sends:
+            if future.done() and future.result().accepted and key not in results:
+                results[key] = future.result().get_result_async()
+        answered = [f for _, f in sends if f.done()]
+        if len(answered) == len(sends) and all(r.done() for r in results.values()):
+            break
+    for _ in range(10):  # feedback still queued behind the results
+        rclpy.spin_once(node, timeout_sec=0.05)
+    report = {key: {'answered': future.done() and future.result().accepted,
+                    'feedback': received[key]} for key, future in sends[:7]}
+    print('RESULT ' + json.dumps(report), flush=True)
+
+
+if __name__ == '__main__':
+    main()
