@@ -1,6 +1,6 @@
 """What filtered clients cost the action server: its achieved rate and CPU per message.
 
-For every point (feedback size x N client processes, one goal each) one guarded server runs the
+For every point (feedback size x N client processes, one goal each) one server runs the
 configurations one after another, plain rclpy first, through the load harness of ``make demo``
 (:mod:`harness.load`). Every figure is compared with the plain rclpy phase of the same server, as
 a ratio:
@@ -9,8 +9,10 @@ a ratio:
   finished (the rate the server's publishing threads achieved);
 - ``CPU/msg``: the server's user + system CPU seconds over the same window, per message published.
 
-Two guard modes, each with its own servers:
+Three guard modes, each with its own servers:
 
+- ``unguarded``: no guard, as the server of someone who only swapped a client's import: the default
+  clients' filter class is unknown to it, so it filters nothing and sends as to plain clients;
 - ``accelerated`` (the default guard): the guard answers uuid-only filters from the sample's UUID
   bytes (``cft_action/_guard_filter.c``);
 - ``locking``: the same guard with ``CFT_GUARD_ACCELERATE=0``: only the locks, so Fast DDS
@@ -43,7 +45,10 @@ from harness import load
 REPO = Path(__file__).resolve().parent.parent
 #: int32 elements after the 3-element header: 36 B, 1 kB and 10 kB feedback messages.
 SIZES = {'36B': 0, '1k': 250, '10k': 2500}
-GUARD_MODES = {'accelerated': {}, 'locking': {'CFT_GUARD_ACCELERATE': '0'}}
+#: guard mode -> (under the guard, the server's extra environment)
+GUARD_MODES: dict[str, tuple[bool, dict[str, str]]] = {
+    'unguarded': (False, {}), 'accelerated': (True, {}),
+    'locking': (True, {'CFT_GUARD_ACCELERATE': '0'})}
 
 
 class CappedRun(load.LoadRun):
@@ -159,7 +164,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     parser.add_argument('--sizes', default='36B,1k,10k', help='from: ' + ', '.join(SIZES))
     parser.add_argument('--clients', default='1,4,16,32', help='N, comma-separated')
-    parser.add_argument('--guards', default='accelerated,locking',
+    parser.add_argument('--guards', default='unguarded,accelerated',
                         help='guard modes, from: ' + ', '.join(GUARD_MODES))
     parser.add_argument('--configs', default='rclpy,client,goals,upstream',
                         help='from: ' + ', '.join(load.CONFIG_LABELS) + ' (rclpy first)')
@@ -322,7 +327,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 progress(f'point {done}/{total}: guard {guard_mode}, {size} feedback, N = {n}')
                 spec = load.LoadSpec(clients=n, goals=1, order=order, rate_hz=args.rate,
                                          pad=SIZES[size], network='count', settle_s=2.0,
-                                         server_env=GUARD_MODES[guard_mode])
+                                         guarded=GUARD_MODES[guard_mode][0],
+                                         server_env=GUARD_MODES[guard_mode][1])
                 if args.profile:
                     args.profile.mkdir(parents=True, exist_ok=True)
                 figures = run_point(spec, args.configs, args.phase_timeout, progress,

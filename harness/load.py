@@ -87,6 +87,7 @@ class LoadSpec:
     :ivar settle_s: seconds of quiet after the last goal before a phase is accounted (see
         :data:`SETTLE_S`).
     :ivar server_env: extra environment of the server process (e.g. the guard's settings).
+    :ivar guarded: whether the server runs under the guard (``cft-action guard``).
     :ivar bystanders: plain rclpy client processes started first in every phase, next to the
         phase's N clients, with M goals each like them; they receive every goal's feedback. They
         are reported apart (``phase['bystanders']``, ``phase['bystander_summary']``) and are not
@@ -107,6 +108,7 @@ class LoadSpec:
     goals_timeout: Optional[float] = None
     settle_s: float = SETTLE_S
     server_env: dict[str, str] = dataclasses.field(default_factory=dict)
+    guarded: bool = True
     bystanders: int = 0
     result_timeout_s: int = RESULT_TIMEOUT_S
     goal_interval_s: float = 0.0
@@ -212,7 +214,9 @@ class LoadRun:
                              '--depth', self.depth, '--result-timeout', spec.result_timeout_s)
         if self.topology:
             argv = self.topology.command(self.topology.server, argv)
-        self.server = Proc('server', argv, guard.environment({**self.env, **spec.server_env}))
+        server_env = {**self.env, **spec.server_env}
+        self.server = Proc('server', argv,
+                           guard.environment(server_env) if spec.guarded else server_env)
         try:
             self.server.expect('READY', 60)
         except Exception:
