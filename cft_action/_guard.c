@@ -441,9 +441,10 @@ void cft_uuid_class_created(void *filter) {
 }
 
 // 0: lookups of the library's filter class answered; 1: filters of that class created (for the
-// writers and readers of this process); 2: their verdicts.
+// writers and readers of this process); 2: their verdicts; 3: filters created or changed.
 CFT_EXPORT unsigned long cft_guard_uuid_class_count(int which) {
   if (which == 2) return cft_uuid_class_total_verdicts();
+  if (which == 3) return cft_uuid_class_total_changes();
   return __atomic_load_n(which == 0 ? &uuid_class_lookups : &uuid_class_filters, __ATOMIC_RELAXED);
 }
 

@@ -110,3 +110,16 @@ int cft_patch_got(const char *soname, const char *symbol, void *expected, void *
   if (current != expected) return 0;
   return store_slot(s.slot, to) == 0 ? 1 : -1;
 }
+
+int cft_install_once(struct cft_install *once, int (*install)(struct cft_install *)) {
+  pthread_mutex_lock(&once->mutex);
+  if (once->status == 1) once->status = install(once);
+  int status = once->status;
+  pthread_mutex_unlock(&once->mutex);
+  return status;
+}
+
+int cft_install_fail(struct cft_install *once, int status, const char *what, const char *detail) {
+  snprintf(once->error, sizeof once->error, "%s: %s", what, detail ? detail : "");
+  return status;
+}

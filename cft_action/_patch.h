@@ -15,4 +15,17 @@ int cft_patch_vtable(void *library, const char *vtable, void *from, void *to);
 // there is no such library or slot.
 int cft_patch_got(const char *soname, const char *symbol, void *expected, void *to);
 
+// An installation that runs at most once per process: the first cft_install_once runs `install`,
+// and every call returns its status (0 or more: installed; below 0: failed, `error` says why).
+#include <pthread.h>
+struct cft_install {
+  pthread_mutex_t mutex;
+  int status;  // 1: not tried yet
+  char error[256];
+};
+#define CFT_INSTALL_INIT {PTHREAD_MUTEX_INITIALIZER, 1, ""}
+int cft_install_once(struct cft_install *once, int (*install)(struct cft_install *));
+// Records why the installation failed; returns `status`.
+int cft_install_fail(struct cft_install *once, int status, const char *what, const char *detail);
+
 #endif  // CFT_ACTION_PATCH_H_

@@ -12,8 +12,6 @@
 // unsupported), so it sends that reader everything and filters nothing, unguarded.
 #define _GNU_SOURCE
 #include <dlfcn.h>
-#include <pthread.h>
-#include <stdio.h>
 #include <string.h>
 
 #include "_patch.h"
@@ -36,9 +34,7 @@ static find_fn real_find;
 static create_cft_fn real_create_cft;
 static __thread int in_request;       // inside cft_uuid_class_begin/end
 static __thread void *created;        // the filter the factory created last on this thread
-static pthread_mutex_t install_mutex = PTHREAD_MUTEX_INITIALIZER;
-static int install_status = 1;        // 1: not tried; 0: ours; 2: the guard answers; < 0: failed
-static char install_error[256];
+static struct cft_install installed = CFT_INSTALL_INIT;  // 0: ours; 2: the guard answers
 
 bool cft_uuid_class_may_create(void) { return in_request; }
 void cft_uuid_class_created(void *filter) { created = filter; }
@@ -54,36 +50,26 @@ static void *create_cft(void *self, const void *name, void *related_topic, const
                          in_request ? CFT_UUID_CLASS : class_name);
 }
 
-static int fail(int status, const char *what, const char *detail) {
-  snprintf(install_error, sizeof install_error, "%s: %s", what, detail ? detail : "");
-  return status;
-}
-
-static int install_locked(void) {
+static int install(struct cft_install *once) {
   void *library = dlopen(FASTRTPS_SONAME, RTLD_NOW | RTLD_NOLOAD);
-  if (library == NULL) return fail(-1, FASTRTPS_SONAME " is not loaded", dlerror());
+  if (library == NULL)
+    return cft_install_fail(once, -1, FASTRTPS_SONAME " is not loaded", dlerror());
   real_find = (find_fn)dlsym(library, FIND);
   real_create_cft = (create_cft_fn)dlsym(library, CREATE_CFT);
   if (real_find == NULL || real_create_cft == NULL)
-    return fail(-2, "a member is not exported by " FASTRTPS_SONAME, dlerror());
+    return cft_install_fail(once, -2, "a member is not exported by " FASTRTPS_SONAME, dlerror());
   int found = cft_patch_got(FASTRTPS_SONAME, FIND, (void *)real_find, (void *)find);
-  if (found < 0) return fail(-3, "no PLT slot in " FASTRTPS_SONAME " for", FIND);
+  if (found < 0) return cft_install_fail(once, -3, "no PLT slot in " FASTRTPS_SONAME " for", FIND);
   if (cft_patch_got(FASTRTPS_SONAME, CREATE_CFT, (void *)real_create_cft, (void *)create_cft) != 1)
-    return fail(-4, "no PLT slot in " FASTRTPS_SONAME " for", CREATE_CFT);
+    return cft_install_fail(once, -4, "no PLT slot in " FASTRTPS_SONAME " for", CREATE_CFT);
   return found == 1 ? 0 : 2;
 }
 
 // 0 once this library answers the class, 2 if the preloaded guard does, < 0 if neither can be
 // arranged (cft_uuid_class_error says why). Later calls return the first result.
-EXPORT int cft_uuid_class_install(void) {
-  pthread_mutex_lock(&install_mutex);
-  if (install_status == 1) install_status = install_locked();
-  int status = install_status;
-  pthread_mutex_unlock(&install_mutex);
-  return status;
-}
+EXPORT int cft_uuid_class_install(void) { return cft_install_once(&installed, install); }
 
-EXPORT const char *cft_uuid_class_error(void) { return install_error; }
+EXPORT const char *cft_uuid_class_error(void) { return installed.error; }
 
 // Around one rcl content-filter call for a reader that is to use the class.
 EXPORT void cft_uuid_class_begin(void) {

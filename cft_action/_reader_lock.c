@@ -52,9 +52,7 @@ static __thread int holds_write_lock;  // create_content_filter may re-enter on 
 static is_relevant_fn real_is_relevant, real_is_relevant_thunk;
 static create_fn real_create;
 static unsigned long evaluations, replacements;  // under the lock; read relaxed
-static pthread_mutex_t install_mutex = PTHREAD_MUTEX_INITIALIZER;
-static int install_status = 1;  // 1: not tried, 0: installed, < 0: failed
-static char install_error[256];
+static struct cft_install installed = CFT_INSTALL_INIT;
 
 static bool read_locked(is_relevant_fn real, const void *self, const void *change,
                         const void *guid) {
@@ -90,39 +88,31 @@ static uint32_t locked_create(void *self, const char *filter_class, const char *
   return ret;
 }
 
-static int fail(int status, const char *what, const char *detail) {
-  snprintf(install_error, sizeof install_error, "%s: %s", what, detail ? detail : "");
-  return status;
-}
-
-static int install_locked(void) {
+static int install(struct cft_install *once) {
   void *library = dlopen(FASTRTPS_SONAME, RTLD_NOW | RTLD_NOLOAD);
-  if (library == NULL) return fail(-1, FASTRTPS_SONAME " is not loaded", dlerror());
+  if (library == NULL)
+    return cft_install_fail(once, -1, FASTRTPS_SONAME " is not loaded", dlerror());
   real_is_relevant = (is_relevant_fn)dlsym(library, IS_RELEVANT);
   real_is_relevant_thunk = (is_relevant_fn)dlsym(library, IS_RELEVANT_THUNK);
   real_create = (create_fn)dlsym(library, CREATE_FILTER);
   if (!real_is_relevant || !real_is_relevant_thunk || !real_create)
-    return fail(-2, "a member is not exported by " FASTRTPS_SONAME, dlerror());
+    return cft_install_fail(once, -2, "a member is not exported by " FASTRTPS_SONAME, dlerror());
   int creates = cft_patch_vtable(library, FACTORY_VTABLE, (void *)real_create, (void *)locked_create);
-  if (creates < 1) return fail(-3, "no create_content_filter slot in", FACTORY_VTABLE);
+  if (creates < 1)
+    return cft_install_fail(once, -3, "no create_content_filter slot in", FACTORY_VTABLE);
   int entries = cft_patch_vtable(library, CFT_VTABLE, (void *)real_is_relevant,
                              (void *)locked_is_relevant);
   int thunks = cft_patch_vtable(library, CFT_VTABLE, (void *)real_is_relevant_thunk,
                             (void *)locked_is_relevant_thunk);
-  if (thunks < 1 || entries < 0) return fail(-4, "no is_relevant slot in", CFT_VTABLE);
+  if (thunks < 1 || entries < 0)
+    return cft_install_fail(once, -4, "no is_relevant slot in", CFT_VTABLE);
   return 0;
 }
 
 // 0 once installed (later calls return at once), < 0 if it cannot be: see cft_reader_lock_error.
-EXPORT int cft_reader_lock_install(void) {
-  pthread_mutex_lock(&install_mutex);
-  if (install_status == 1) install_status = install_locked();
-  int status = install_status;
-  pthread_mutex_unlock(&install_mutex);
-  return status;
-}
+EXPORT int cft_reader_lock_install(void) { return cft_install_once(&installed, install); }
 
-EXPORT const char *cft_reader_lock_error(void) { return install_error; }
+EXPORT const char *cft_reader_lock_error(void) { return installed.error; }
 
 // 0: filter evaluations by readers that took the read lock; 1: filter replacements.
 EXPORT unsigned long cft_reader_lock_count(int which) {

@@ -28,7 +28,9 @@
 // The CDR encapsulation header, then FeedbackMessage.goal_id.uuid: 16 octets, with no padding.
 #define UUID_OFFSET 4
 
-static unsigned long total_verdicts;  // of every filter of this library, for cft_uuid_class_total
+// Of every filter of this library: verdicts, and filters created or changed (each is a filter
+// event at a writer or a reader of this process).
+static unsigned long total_verdicts, total_changes;
 
 struct uuid_filter {
   const void *const *vtable;
@@ -77,6 +79,7 @@ static uint32_t factory_create(void *self, const char *class_name, const char *t
     existing->program = program;
     pthread_rwlock_unlock(&existing->lock);
     free(old);
+    __atomic_fetch_add(&total_changes, 1, __ATOMIC_RELAXED);
     return RETCODE_OK;
   }
   struct uuid_filter *filter = calloc(1, sizeof *filter);
@@ -88,6 +91,7 @@ static uint32_t factory_create(void *self, const char *class_name, const char *t
   pthread_rwlock_init(&filter->lock, NULL);
   filter->program = program;
   *filter_instance = filter;
+  __atomic_fetch_add(&total_changes, 1, __ATOMIC_RELAXED);
   cft_uuid_class_created(filter);
   return RETCODE_OK;
 }
@@ -118,4 +122,8 @@ unsigned long cft_uuid_filter_verdicts(const void *filter) {
 
 unsigned long cft_uuid_class_total_verdicts(void) {
   return __atomic_load_n(&total_verdicts, __ATOMIC_RELAXED);
+}
+
+unsigned long cft_uuid_class_total_changes(void) {
+  return __atomic_load_n(&total_changes, __ATOMIC_RELAXED);
 }

@@ -38,5 +38,7 @@ unsigned long cft_uuid_filter_verdicts(const void *filter);
 
 // How many verdicts every filter of this library has given.
 unsigned long cft_uuid_class_total_verdicts(void);
+// How many filters of this library were created or changed.
+unsigned long cft_uuid_class_total_changes(void);
 
 #endif  // CFT_ACTION_UUID_CLASS_H_

@@ -150,7 +150,7 @@ def filter_counts() -> dict[str, int]:
 
 
 #: The counters of cft_guard_uuid_class_count() in _guard.c, in its order.
-UUID_CLASS_COUNTERS = ('lookups', 'filters', 'verdicts')
+UUID_CLASS_COUNTERS = ('lookups', 'filters', 'verdicts', 'changes')
 
 
 def uuid_class_counts() -> dict[str, int]:
@@ -159,7 +159,8 @@ def uuid_class_counts() -> dict[str, int]:
     A client's feedback filter uses that class (``CFT_ACTION_UUID``, cft_action/_uuid_class.h),
     which only a guarded server knows: ``lookups`` counts the times Fast DDS asked the guard for
     its factory, ``filters`` the filters created (one per filtered reader and writer, and per
-    reader of this process), ``verdicts`` the samples they judged. ``{}`` without the guard.
+    reader of this process), ``verdicts`` the samples they judged, ``changes`` the filters
+    created or changed in place: one per filter event. ``{}`` without the guard.
     """
     return _counters('cft_guard_uuid_class_count', UUID_CLASS_COUNTERS)
 

@@ -2,8 +2,8 @@
 
 Every change of a client's feedback filter is an event at the server's feedback writer, and on an
 unguarded Fast DDS 2.14 server such events can crash it (docs/SAFETY.md). The guard sees each one
-(``process_reader_filter_info``) and counts the uuid filters it compiled from them, so the server
-itself can tell how many events a client caused.
+(``process_reader_filter_info``) and counts the filters of the library's class that it created or
+changed for them, so the server itself can tell how many events a client caused.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from tests.test_action_client import result_of, round_trip, send
 
 
 def compiled(child) -> int:
-    return child.request_json('stats', 'STATS')['guard_filter']['compiled']
+    return child.request_json('stats', 'STATS')['guard_uuid_class']['changes']
 
 
 def test_client_mode_changes_its_filter_only_for_an_untagged_caller_uuid(ros):

@@ -1,11 +1,11 @@
 """Issue 18: a burst of goals with a caller-supplied UUID in it loses no feedback.
 
 The first feedback of goals sent just before a caller-supplied UUID was lost because the client,
-inside that ``send_goal_async``, logged its one-time note through rclpy's logger, whose caller lookup
-takes 50-165 ms on its first call in a process: nobody took feedback meanwhile, and the feedback
-queue (keep-last, one history for all goals) replaced the oldest messages. The client's logs now
-never go through that lookup (``PromptLogger``). The helper makes the lookup take seconds, which
-makes the loss certain for a client that still uses it.
+inside that ``send_goal_async``, logged its one-time note through rclpy's logger, whose caller
+lookup takes 50-165 ms on its first call in a process: nobody took feedback meanwhile, and the
+feedback queue (keep-last, one history for all goals) replaced the oldest messages. The client's
+logs now never go through that lookup (``PromptLogger``). The helper makes the lookup take seconds,
+which makes the loss certain for a client that still uses it.
 """
 
 import json

@@ -100,27 +100,33 @@ def test_the_c_objects_match_the_fastdds_interfaces(tmp_path):
     assert fastdds_header_probe(PROBE, tmp_path) == [1, 9, 1, 8, 8, 4, 1, 4, 8]
 
 
+def own_and_foreign_goal(ros, child, action):
+    """One goal of a default client and one of a plain one; returns the default client."""
+    ours = make_client(ros, action)
+    other = ActionClient(ros.node, Fibonacci, action, feedback_filter='off')
+    assert other.wait_for_server(timeout_sec=20)
+    foreign = send(ros, other, ORDER, feedback_callback=lambda _: None)
+    own = send(ros, ours, ORDER, feedback_callback=lambda _: None)
+    result_of(ros, foreign)
+    result_of(ros, own)
+    assert ros.spin_until(lambda: ours.feedback_filter_state.feedback_taken == ORDER, 10)
+    ros.spin_for(0.5)
+    assert child.poll() is None, f'server died\n{child.tail()}'
+    return ours
+
+
 def test_an_unguarded_server_sends_everything_and_the_reader_keeps_only_its_own(ros):
     """Against an unguarded server the client's reader judges every sample itself (its
     verdicts count them all) and only its own goals' feedback reaches rcl."""
     action = '/' + unique_name('fib')
     child = start_server(action, guarded=False)
     try:
-        ours = make_client(ros, action)
-        other = ActionClient(ros.node, Fibonacci, action, feedback_filter='off')
-        assert other.wait_for_server(timeout_sec=20)
-        foreign = send(ros, other, ORDER, feedback_callback=lambda _: None)
-        own = send(ros, ours, ORDER, feedback_callback=lambda _: None)
-        result_of(ros, foreign)
-        result_of(ros, own)
-        assert ros.spin_until(lambda: ours.feedback_filter_state.feedback_taken == ORDER, 10)
-        ros.spin_for(0.5)
+        ours = own_and_foreign_goal(ros, child, action)
         state = ours.feedback_filter_state
         assert state.active and state.filtered_in == 'reader', state
         assert state.feedback_taken == ORDER and state.feedback_dropped == 0, state
         # Every sample came over the wire to the reader, which judged it: both goals' feedback.
         assert ours._reader.reader_verdicts >= 2 * ORDER
-        assert child.poll() is None, f'server died\n{child.tail()}'
     finally:
         child.stop()
 
@@ -129,14 +135,7 @@ def test_a_guarded_server_filters_for_the_client_in_its_writer(ros):
     action = '/' + unique_name('fib')
     child = start_server(action, guarded=True)
     try:
-        ours = make_client(ros, action)
-        other = ActionClient(ros.node, Fibonacci, action, feedback_filter='off')
-        assert other.wait_for_server(timeout_sec=20)
-        foreign = send(ros, other, ORDER, feedback_callback=lambda _: None)
-        own = send(ros, ours, ORDER, feedback_callback=lambda _: None)
-        result_of(ros, foreign)
-        result_of(ros, own)
-        assert ros.spin_until(lambda: ours.feedback_filter_state.feedback_taken == ORDER, 10)
+        ours = own_and_foreign_goal(ros, child, action)
         state = ours.feedback_filter_state
         assert state.filtered_in == 'writer', state
         assert ours._reader.reader_verdicts == 0  # the writer marked every sample it sent
