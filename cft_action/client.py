@@ -2,9 +2,12 @@
 """A drop-in :class:`rclpy.action.ActionClient` whose feedback subscription is content-filtered.
 
 An action server publishes the feedback of all goals on one topic, so a plain client receives,
-deserializes and drops the feedback of every other client's goals. This client asks the server's
-DataWriter, by a DDS content filter on ``goal_id.uuid``, to send it only its own goals' feedback.
-rclpy's own UUID check still guards every callback, in every mode.
+deserializes and drops the feedback of every other client's goals. This client filters its
+feedback subscription on ``goal_id.uuid``, with the library's own filter class: a server run under
+``cft-action guard`` then sends it only its own goals' feedback, and any other server sends it
+everything, as to a plain client, while the client's DDS reader drops other goals' feedback before
+Python (docs/INTERNALS.md section 16). rclpy's own UUID check still guards every callback, in every
+mode.
 
 Feedback, status and result travel on different topics, so a goal's last feedback can arrive after
 its result. rclpy forgets a goal's feedback callback when the result arrives, and so loses that
