@@ -11,15 +11,27 @@ set -euo pipefail
 [ $# -ge 1 ] || { echo "usage: $0 VENV [STACK|wheels]" >&2; exit 2; }
 venv=$(realpath "$1"); stack=${2:-wheels}
 [ -x "$venv/bin/python" ] || { echo "stack_env.sh: $venv is not a venv" >&2; exit 2; }
-first=
+first= preload=
 if [ "$stack" != wheels ]; then
   stack=$(realpath "$stack")
   for lib in libfastrtps.so.2.14 librmw_fastrtps_shared_cpp.so librmw_fastrtps_cpp.so; do
     [ -e "$stack/install/lib/$lib" ] || { echo "stack_env.sh: no $lib in $stack/install/lib" >&2; exit 2; }
   done
   first="$stack/install/lib:"
+  # The wheels bring their own tinyxml2 (6.0.0, under a hashed soname) and it is mapped before the
+  # stack's: unversioned symbols bind to the first definition in scope, so the stack's Fast DDS,
+  # compiled against the system's tinyxml2, would run the wheels' (LD_DEBUG=bindings showed
+  # XMLDocument's constructor and Parse bound so). Preloading the one it was linked to puts that
+  # first; nothing else of the wheels calls tinyxml2 (their Fast DDS and rmw are the ones replaced).
+  xml=$(readelf -d "$stack/install/lib/libfastrtps.so.2.14" | sed -n 's/.*NEEDED.*\[\(libtinyxml2[^]]*\)\].*/\1/p')
+  if [ -n "$xml" ]; then
+    xml=$(ldconfig -p | awk -v n="$xml" '$1 == n { print $NF; exit }')
+    [ -n "$xml" ] || { echo "stack_env.sh: the tinyxml2 of $stack is not in ldconfig's cache" >&2; exit 2; }
+    preload="$xml${LD_PRELOAD:+:$LD_PRELOAD}"
+  fi
 fi
 libs=$(ls -d "$venv"/lib/python3*/site-packages/ros_*.libs | sort | tr '\n' ':')
 echo "export _ROS_WHEELS_BOOTSTRAP_COMPLETE=1"
 echo "export LD_LIBRARY_PATH=$first$venv/lib:${libs%:}"
 echo "export RMW_IMPLEMENTATION=rmw_fastrtps_cpp"
+[ -z "${preload:-}" ] || echo "export LD_PRELOAD=$preload"
