@@ -31,7 +31,7 @@ for stack in $stacks; do
   dir=$cache/$stack
   if [ "$stack" != wheels ] && [ ! -e "$dir/install/lib/librmw_fastrtps_cpp.so" ]; then
     if [ -n "${COMPAT_BUILD:-}" ] && [ -x "$COMPAT_BUILD" ]; then
-      echo "== $stack: not built; building it with $COMPAT_BUILD (about 45-60 min on 2 cores)"
+      echo "== $stack: not built; building it with $COMPAT_BUILD (about 20 min at nice 19 on 2 cores)"
       "$COMPAT_BUILD" "$stack" "$cache" "$venv" || { echo "== $stack: build FAILED"; status=1; continue; }
     else
       echo "== $stack: no stack in $dir, and no COMPAT_BUILD to build it (docs/COMPATIBILITY.md)"
@@ -53,7 +53,7 @@ for stack in $stacks; do
       echo "stack=$stack"; echo "dir=$dir"; echo "when=$(date -u +%FT%TZ)"
       echo "cft_action=$(git -C "$root" rev-parse HEAD)$(git -C "$root" diff --quiet HEAD -- cft_action tests || echo ' (dirty)')"
       [ "$stack" != wheels ] && cat "$dir/STACK_INFO"
-      echo "LD_LIBRARY_PATH=$LD_LIBRARY_PATH"
+      echo "LD_LIBRARY_PATH=$LD_LIBRARY_PATH"; echo "LD_PRELOAD=${LD_PRELOAD:-}"
     } > "$out/summary.txt"
     if [ "$stack" = wheels ]; then "$here/probe.sh" "$venv"; else "$here/probe.sh" "$venv" "$dir"; fi \
       > "$out/probe.txt" 2>&1 || echo "== $stack: the layout probe failed ($out/probe.txt)"
