@@ -25,7 +25,8 @@ if [ "$stack" != wheels ]; then
   # first; nothing else of the wheels calls tinyxml2 (their Fast DDS and rmw are the ones replaced).
   xml=$(readelf -d "$stack/install/lib/libfastrtps.so.2.14" | sed -n 's/.*NEEDED.*\[\(libtinyxml2[^]]*\)\].*/\1/p')
   if [ -n "$xml" ]; then
-    xml=$(ldconfig -p | awk -v n="$xml" '$1 == n { print $NF; exit }')
+    # (awk reads to the end: an early exit would SIGPIPE ldconfig, and pipefail end this script)
+    xml=$(ldconfig -p | awk -v n="$xml" '$1 == n && !found { print $NF; found = 1 }')
     [ -n "$xml" ] || { echo "stack_env.sh: the tinyxml2 of $stack is not in ldconfig's cache" >&2; exit 2; }
     preload="$xml${LD_PRELOAD:+:$LD_PRELOAD}"
   fi
