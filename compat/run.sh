@@ -48,7 +48,8 @@ for stack in $stacks; do
   out=$cache/results/$stack-$(date -u +%Y%m%dT%H%M%SZ); mkdir -p "$out"
   (
     target=$dir; [ "$stack" = wheels ] && target=wheels
-    eval "$("$here/stack_env.sh" "$venv" "$target")" || exit 1
+    exports=$("$here/stack_env.sh" "$venv" "$target") || { echo "== $stack: no environment"; exit 1; }
+    eval "$exports"
     {
       echo "stack=$stack"; echo "dir=$dir"; echo "when=$(date -u +%FT%TZ)"
       echo "cft_action=$(git -C "$root" rev-parse HEAD)$(git -C "$root" diff --quiet HEAD -- cft_action tests || echo ' (dirty)')"
