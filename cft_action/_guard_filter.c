@@ -90,11 +90,22 @@ CFT_EXPORT unsigned long cft_guard_filter_count(int which) {
 
 // ---- reading the reader's discovery data -----------------------------------------------------------
 static bool layout_failed;  // set once, read without a lock: verdicts then all go to Fast DDS
+static const char *layout_failure;  // what did not look right; said at the first DDS-SQL verdict
+
+// Said only once a DDS-SQL filter is evaluated, when it matters: the library's own clients use
+// their own filter class (_uuid_class.h), which never comes here, and a server that only has such
+// clients, or none, has nothing to be told.
+static void say_layout_failure(void) {
+  static bool said;
+  if (__atomic_load_n(&layout_failed, __ATOMIC_ACQUIRE) && !__atomic_exchange_n(&said, true, __ATOMIC_RELAXED))
+    cft_say("filter verdicts off: the reader discovery data does not look like Fast DDS 2.14.5's "
+            "(%s); every DDS-SQL filter goes to Fast DDS", layout_failure);
+}
 
 static void layout_suspect(const char *what) {
-  if (!__atomic_exchange_n(&layout_failed, true, __ATOMIC_RELAXED))
-    cft_say("filter verdicts off: the reader discovery data does not look like Fast DDS 2.14.5's "
-            "(%s); every filter goes to Fast DDS", what);
+  if (__atomic_load_n(&layout_failed, __ATOMIC_RELAXED)) return;
+  layout_failure = what;
+  __atomic_store_n(&layout_failed, true, __ATOMIC_RELEASE);
 }
 
 // A fixed_string<255>, or NULL when its length and terminator disagree.
@@ -302,6 +313,7 @@ bool cft_filter_evaluate(const void *self, const void *payload, const void *samp
                          const void *reader_guid) {
   int verdict = enabled ? uuid_verdict(self, payload, reader_guid) : -1;
   if (verdict < 0) {
+    say_layout_failure();
     count(C_REAL);
     return real_evaluate(self, payload, sample_info, reader_guid);
   }
