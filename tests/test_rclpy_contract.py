@@ -195,7 +195,7 @@ def feedback_round_trip(ros, client, tries=5):
         received = []
         handle = send(ros, client, 1, feedback_callback=received.append)
         assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
-        if ros.spin_until(lambda: received, 2):
+        if ros.spin_until(lambda received=received: received, 2):
             return sent
     raise AssertionError(f'no feedback reached the client in {tries} goals')
 
