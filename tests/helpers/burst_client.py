@@ -8,7 +8,8 @@ a goal's first feedback for any client, plain rclpy's too), without spinning, it
 with generated UUIDs and a feedback callback, 1 with a caller-supplied random ``goal_uuid`` and a
 feedback callback, and 1 without a feedback callback; then it spins until every answered goal
 has its result and prints ``RESULT <json>``: per goal with a callback, the feedback indices
-received, and whether it was answered. The feedback queue keeps the last 20 messages, as a deep-enough queue would.
+received, and whether it was answered. The feedback queue keeps the last 20 messages, as a
+deep-enough queue would.
 
 STALL_S makes every call of rclpy's logger caller lookup (``_find_caller``, which takes 50-165 ms
 on its first call in a process) take that many seconds longer, so that a client that logs through
