@@ -115,32 +115,26 @@ def own_and_foreign_goal(ros, child, action):
     return ours
 
 
-def test_an_unguarded_server_sends_everything_and_the_reader_keeps_only_its_own(ros):
-    """Against an unguarded server the client's reader judges every sample itself (its
-    verdicts count them all) and only its own goals' feedback reaches rcl."""
+@pytest.mark.parametrize('guarded', [False, True], ids=['unguarded', 'guarded'])
+def test_where_other_goals_feedback_is_dropped(ros, guarded):
+    """An unguarded server sends everything: the client's reader judges every sample itself and
+    only its own goals' feedback reaches rcl. A guarded one filters in its writer, and marks what
+    it sends, so the reader judges nothing."""
     action = '/' + unique_name('fib')
-    child = start_server(action, guarded=False)
+    child = start_server(action, guarded=guarded)
     try:
         ours = own_and_foreign_goal(ros, child, action)
         state = ours.feedback_filter_state
-        assert state.active and state.filtered_in == 'reader', state
-        assert state.feedback_taken == ORDER and state.feedback_dropped == 0, state
-        # Every sample came over the wire to the reader, which judged it: both goals' feedback.
-        assert ours._reader.reader_verdicts >= 2 * ORDER
-    finally:
-        child.stop()
-
-
-def test_a_guarded_server_filters_for_the_client_in_its_writer(ros):
-    action = '/' + unique_name('fib')
-    child = start_server(action, guarded=True)
-    try:
-        ours = own_and_foreign_goal(ros, child, action)
-        state = ours.feedback_filter_state
-        assert state.filtered_in == 'writer', state
-        assert ours._reader.reader_verdicts == 0  # the writer marked every sample it sent
-        counts = child.request_json('stats', 'STATS')['guard_uuid_class']
-        assert counts['filters'] >= 1 and counts['verdicts'] >= 2 * ORDER, counts
+        assert state.active and state.feedback_taken == ORDER, state
+        assert state.feedback_dropped == 0, state
+        if guarded:
+            assert state.filtered_in == 'writer' and ours._reader.reader_verdicts == 0, state
+            counts = child.request_json('stats', 'STATS')['guard_uuid_class']
+            assert counts['filters'] >= 1 and counts['verdicts'] >= 2 * ORDER, counts
+        else:
+            # Both goals' feedback came over the wire, and the reader judged every sample.
+            assert state.filtered_in == 'reader', state
+            assert ours._reader.reader_verdicts >= 2 * ORDER, state
     finally:
         child.stop()
 
