@@ -374,16 +374,20 @@ class ActionClient(CompatActionClient):
         # the moment between a filter change here and its arrival there; an unguarded one marks
         # nothing, and the reader judges every sample, other goals' included.
         if verdicts and verdicts >= self._feedback_taken:
-            if verdicts >= 10 and not self._logged_unguarded:
-                self._logged_unguarded = True
-                self._cft_logger.info(
-                    "the action server's writer does not filter this client's feedback (the server "
-                    "does not run under 'cft-action guard'): other goals' feedback crosses the "
-                    "network to this client and its DDS reader drops it before Python. Under the "
-                    'guard the server would not send it (docs/BENCHMARKS.md, "Bytes per client")')
             return 'reader'
         return 'writer' if self._feedback_taken else 'unknown'
 
+    def _log_if_unguarded(self) -> None:
+        """Say once that the server does not filter for this client, once there is evidence."""
+        with self._reader.lock:
+            if (self._filtered_in() != 'reader' or (self._reader.reader_verdicts or 0) < 10):
+                return
+            self._logged_unguarded = True
+        self._cft_logger.info(
+            "the action server's writer does not filter this client's feedback (the server does "
+            "not run under 'cft-action guard'): other goals' feedback crosses the network to this "
+            "client and its DDS reader drops it before Python. Under the guard the server would "
+            'not send it (README, "What it saves")')
 
     def new_goal_uuid(self) -> UUID:
         """
@@ -610,8 +614,7 @@ class ActionClient(CompatActionClient):
         if feedback is not None:
             self._feedback_taken += 1
             if not self._logged_unguarded and self._feedback_taken <= 100:
-                with self._reader.lock:
-                    self._filtered_in()  # logs once when the server turns out unguarded
+                self._log_if_unguarded()
             goal_uuid = bytes(feedback.goal_id.uuid)
             if (goal_uuid not in self._cft_feedback_callbacks
                     or self._published_after_result(goal_uuid, stamp)):
