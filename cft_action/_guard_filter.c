@@ -55,8 +55,6 @@ __thread const void *cft_filtering_writer;
 #define RLV_VECTOR 32               // ResourceLimitedVector: vtable, 3 x size_t, then std::vector
 #define STRING255_SIZE 264          // fixed_string<255>: char[256], then size_t length
 #define STRING255_LENGTH 256
-#define PAYLOAD_LENGTH 4            // SerializedPayload_t::length (uint32_t)
-#define PAYLOAD_DATA 8              // SerializedPayload_t::data (octet*)
 #define MAX_PARAMETERS 100
 #define MAX_EXPRESSION 65536        // an RTPS parameter cannot carry more
 
@@ -286,20 +284,15 @@ static int uuid_verdict(const void *self, const void *payload, const void *reade
   const void *writer = cft_filtering_writer;
   if (writer == NULL || reader_guid == NULL || __atomic_load_n(&layout_failed, __ATOMIC_RELAXED))
     return -1;
-  const uint8_t *p = payload;
-  uint32_t length;
-  const uint8_t *data;
-  memcpy(&length, p + PAYLOAD_LENGTH, sizeof length);
-  memcpy(&data, p + PAYLOAD_DATA, sizeof data);
-  // Plain CDR, big or little endian; a uint8[16] at offset 0 of the body has no padding.
-  if (data == NULL || length < 20 || data[0] != 0 || data[1] > 1) return -1;
+  const uint8_t *uuid = cft_feedback_uuid(payload);
+  if (uuid == NULL) return -1;
   int verdict = -1;
   pthread_mutex_lock(&table_lock);
   struct entry *e = find_locked(writer, reader_guid);
   if (e != NULL) {
     if (e->instance == NULL) e->instance = self;
     if (e->instance == self) {
-      verdict = cft_uuid_matches(e->program, data + 4);
+      verdict = cft_uuid_matches(e->program, uuid);
     } else {
       clear_locked(e);
       count(C_FOREIGN);

@@ -21,13 +21,6 @@
 #define RETCODE_BAD_PARAMETER 3u
 #define RETCODE_OUT_OF_RESOURCES 5u
 
-// SerializedPayload_t (public header, fastdds/rtps/common/SerializedPayload.h): uint16_t
-// encapsulation, uint32_t length, octet *data.
-#define PAYLOAD_LENGTH 4
-#define PAYLOAD_DATA 8
-// The CDR encapsulation header, then FeedbackMessage.goal_id.uuid: 16 octets, with no padding.
-#define UUID_OFFSET 4
-
 // Of every filter of this library: verdicts, and filters created or changed (each is a filter
 // event at a writer or a reader of this process).
 static unsigned long total_verdicts, total_changes;
@@ -45,17 +38,13 @@ static bool filter_evaluate(const struct uuid_filter *self, const uint8_t *paylo
                             const void *sample_info, const void *reader_guid) {
   (void)sample_info;
   (void)reader_guid;
-  uint32_t length;
-  const uint8_t *data;
-  memcpy(&length, payload + PAYLOAD_LENGTH, sizeof length);
-  memcpy(&data, payload + PAYLOAD_DATA, sizeof data);
   struct uuid_filter *filter = (struct uuid_filter *)self;
   __atomic_fetch_add(&filter->verdicts, 1, __ATOMIC_RELAXED);
   __atomic_fetch_add(&total_verdicts, 1, __ATOMIC_RELAXED);
-  // Encapsulation 0x0000 (CDR, big endian) or 0x0001 (CDR, little endian): octets are unaffected.
-  if (data == NULL || length < UUID_OFFSET + 16 || data[0] != 0 || data[1] > 1) return true;
+  const uint8_t *uuid = cft_feedback_uuid(payload);
+  if (uuid == NULL) return true;
   pthread_rwlock_rdlock(&filter->lock);
-  bool match = cft_uuid_matches(filter->program, data + UUID_OFFSET);
+  bool match = cft_uuid_matches(filter->program, uuid);
   pthread_rwlock_unlock(&filter->lock);
   return match;
 }
