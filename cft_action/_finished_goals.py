@@ -16,6 +16,8 @@ from typing import Any, Callable
 from rclpy.callback_groups import CallbackGroup
 from rclpy.node import Node
 
+from cft_action._paused_timer import PausedTimer
+
 __all__ = ['FinishedGoals']
 
 
@@ -44,19 +46,14 @@ class FinishedGoals:
                  callbacks: dict[bytes, Callable],
                  release_terms: Callable[[list[bytes], bool], bool], *, grace: float,
                  period: float) -> None:
-        self._node = node
-        self._lock = lock
-        self._callbacks = callbacks
-        self._release_terms = release_terms
-        self._grace = grace
-        self._period = period
+        self._lock, self._callbacks, self._release_terms = lock, callbacks, release_terms
+        self._grace, self._period = grace, period
         self._finished: dict[bytes, float] = {}  # goal UUID -> when it finished
         # goal UUID -> source timestamp of its result response (server clock, ns; 0: unknown)
         self._result_stamps: dict[bytes, int] = {}
         self._last_activity = time.monotonic()
         self._drained_at = time.monotonic()  # last wait that found no feedback queued
-        self._timer = node.create_timer(period, self._check, callback_group=callback_group)
-        self._timer.cancel()
+        self._timer = PausedTimer(node, period, self._check, callback_group)
 
     def sent(self, goal_uuid: bytes) -> None:
         """A goal with a feedback callback is being sent; what its UUID left is not its own."""
@@ -101,12 +98,11 @@ class FinishedGoals:
                 self._finished[goal_uuid] = now
             if new:
                 self._last_activity = now
-                if self._timer.is_canceled():
-                    self._timer.reset()
+                self._timer.resume()
 
     def destroy(self) -> None:
         """Stop the timer."""
-        self._node.destroy_timer(self._timer)
+        self._timer.destroy()
 
     def _check(self) -> None:
         now = time.monotonic()
@@ -119,4 +115,4 @@ class FinishedGoals:
                 self._callbacks.pop(goal_uuid, None)
             idle = not self._finished and now - self._last_activity >= self._period
             if not self._release_terms(due, idle) and not self._finished:
-                self._timer.cancel()
+                self._timer.pause()

@@ -20,6 +20,7 @@ from rclpy.qos import QoSProfile
 from rclpy.task import Future
 from unique_identifier_msgs.msg import UUID
 
+from cft_action._paused_timer import PausedTimer
 from cft_action._rclpy_compat import PromptLogger
 from cft_action.arrival import ArrivalGate, ProbeTarget
 from cft_action.goal_filter import random_uuid4
@@ -86,18 +87,11 @@ class HeldGoals:
                  send: Callable[[Any, Optional[Callable], UUID], Future],
                  version_now: Callable[[], int], logger: PromptLogger, probed_service: str, *,
                  timeout: float, poll_period: float) -> None:
-        self._node = node
-        self._gate = gate
-        self._lock = lock
-        self._send = send
-        self._version_now = version_now
-        self._logger = logger
-        self._probed_service = probed_service
-        self._timeout = timeout
+        self._gate, self._lock, self._send, self._version_now = gate, lock, send, version_now
+        self._logger, self._probed_service, self._timeout = logger, probed_service, timeout
         self._queue: list[HeldGoal] = []
         self.count = 0  # requests held since construction
-        self._timer = node.create_timer(poll_period, self._poll, callback_group=callback_group)
-        self._timer.cancel()
+        self._timer = PausedTimer(node, poll_period, self._poll, callback_group)
 
     def needed(self) -> int:
         """The latest version that a held request waits for; 0 when none waits."""
@@ -117,18 +111,18 @@ class HeldGoals:
 
     def destroy(self) -> None:
         """Stop polling; the held requests are never sent."""
-        self._node.destroy_timer(self._timer)
+        self._timer.destroy()
         with self._lock:
             self._gate.end()
 
     def _begin(self) -> None:
         self._gate.begin(self._version_now())
-        self._timer.reset()
+        self._timer.resume()
 
     def _poll(self) -> None:
         with self._lock:
             if not self._gate.proving:
-                self._timer.cancel()
+                self._timer.pause()
                 return
             came = self._gate.poll(time.monotonic(), self._timeout)
             if came is None:
@@ -146,7 +140,7 @@ class HeldGoals:
             if self._queue:
                 self._begin()
             else:
-                self._timer.cancel()
+                self._timer.pause()
 
     def _release(self, up_to_version: int) -> None:
         """Send the held requests, in order, up to the first one that needs a later version."""
