@@ -33,7 +33,7 @@ class ActionEntities:
         result_client, reason = _rcl.action_result_client(client_pointer, resolved_action_name)
         reason = reason or self.feedback_reason
         # Set only when both were found: feedback and results are then taken here.
-        self._result_client: Optional[int] = None
+        self.result_client: Optional[int] = None
         self._feedback_support: Optional[_rcl.MessageSupport] = None
         self._result_support: Optional[_rcl.MessageSupport] = None
         if reason:
@@ -41,20 +41,20 @@ class ActionEntities:
                 'feedback is taken as by rclpy and dropped once the goal result arrives, even '
                 f'feedback the server published before the result: {reason}')
             return
-        self._result_client = result_client
+        self.result_client = result_client
         self._feedback_support = _rcl.MessageSupport(action_type.Impl.FeedbackMessage)
         self._result_support = _rcl.MessageSupport(action_type.Impl.GetResultService.Response)
 
     @property
     def takes_here(self) -> bool:
         """Whether feedback and result responses are taken here, with their source timestamps."""
-        return self._result_client is not None
+        return self.result_client is not None
 
     def take_result(self) -> tuple[Optional[int], Optional[Any], int]:
         """``(sequence_number, response, source_timestamp)``; ``(None, None, 0)`` if none came."""
-        if self._result_client is None or self._result_support is None:
+        if self.result_client is None or self._result_support is None:
             return None, None, 0
-        return _rcl.take_response(self._result_client, self._result_support)
+        return _rcl.take_response(self.result_client, self._result_support)
 
     def take_feedback(self) -> tuple[Optional[Any], int]:
         """``(feedback_message, source_timestamp)``; ``(None, 0)`` if none came."""
