@@ -15,8 +15,11 @@ them. Every filtered reader of the package therefore follows one rule, kept here
   the reason is in its state.
 
 Every expression passes :mod:`cft_action.sql` before it reaches rcl: Fast DDS terminates the process
-on a ``LIKE`` or ``MATCH`` pattern that its regex engine rejects. Every call holds one process-wide
-lock, because rcl documents its content-filter functions as not thread-safe.
+on a ``LIKE`` or ``MATCH`` pattern that its regex engine rejects. Setting and reading a filter hold
+one process-wide lock, because rcl documents those functions as not thread-safe;
+:func:`has_filter` takes none: ``rcl_subscription_is_cft_enabled`` reads one ``bool`` of the
+subscription (``rmw_subscription_t.is_cft_enabled``), which only the rmw's set call, made under the
+lock, writes.
 
 The owners, :class:`cft_action.ActionClient`, :class:`cft_action.ParameterEventHandler` and
 :func:`cft_action.create_filtered_subscription`, only decide which expression they want now.
@@ -123,6 +126,10 @@ class ReaderFilterState(NamedTuple):
     expression_parameters: tuple[str, ...]
     updates: int
 
+    def unfiltered(self, reason: str) -> ReaderFilterState:
+        """The state as an owner reports it while the filter does not narrow, for ``reason``."""
+        return self._replace(active=False, reason=reason, expression='', expression_parameters=())
+
 
 class FilteredReader:
     """The content filter of one subscription, from its installation to its end.
@@ -207,15 +214,19 @@ class FilteredReader:
             self._updates += 1
             return True
 
-    def update(self, options: ContentFilterOptions) -> None:
-        """Change the filter in place if it is active; abandon it if the change is rejected."""
+    def update(self, options: ContentFilterOptions) -> bool:
+        """Change the filter in place if it is active; abandon it if the change is rejected.
+
+        :return: True if a change was made.
+        """
         with self.lock:
             if self._filter is None:
-                return
+                return False
             try:
-                self.change(options)
+                return self.change(options)
             except ContentFilterError as e:
                 self.abandon(f'a filter update failed: {e}')
+                return False
 
     def abandon(self, reason: str) -> None:
         """Let every sample through again, in place, and stay unfiltered for good."""

@@ -134,15 +134,37 @@ class CompatActionClient(_RclpyActionClient):
     """rclpy's ActionClient, with its private state under names of this package's own.
 
     :class:`cft_action.ActionClient` derives from it and uses only these members.
+
+    rclpy's constructor creates the rcl action client and then hands the client to
+    ``Node.add_waitable``, where an executor can first see it; :meth:`_cft_before_first_wait`
+    runs in between.
     """
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
-        super().__init__(*args, **kwargs)
+    def __init__(self, node: Node, *args: Any, **kwargs: Any) -> None:
+        shadowed = node.__dict__.get('add_waitable')
+        add_waitable = node.add_waitable
+
+        def hook_then_add(waitable: Any) -> None:
+            if waitable is self:
+                self._cft_before_first_wait()
+            add_waitable(waitable)
+
+        node.add_waitable = hook_then_add  # type: ignore[method-assign]
+        try:
+            super().__init__(node, *args, **kwargs)
+        finally:
+            if shadowed is None:
+                del node.add_waitable
+            else:
+                node.add_waitable = shadowed  # type: ignore[method-assign]
         missing = [name for name in _ACTION_CLIENT_STATE if not hasattr(self, name)]
         if missing:
             raise BindingUnavailable(
                 f'rclpy ActionClient has no {", ".join(missing)}; cft_action is tested with '
                 f'rclpy {".".join(map(str, TESTED_RCLPY))}.x')
+
+    def _cft_before_first_wait(self) -> None:
+        """Runs once the rcl entities exist, before any executor can see them."""
 
     # Read before rclpy's constructor has run (from Node.add_waitable), so no check above yet.
     @property

@@ -8,20 +8,28 @@ has matched the client's response reader. So the reply of a service of that proc
 created *after* the change, proves that every writer there has processed the change
 (docs/INTERNALS.md, "Proof of arrival").
 
-:class:`ServiceProbe` is that round trip. It is polled, not waited on: the parameter event handler
-polls it in a blocking loop, the action client from a timer of its own callback group.
+- :class:`ServiceProbe` is that round trip, to one service.
+- :class:`ArrivalProof` is one proof: a probe for every other participant that hosts a writer,
+  polled until each has answered.
+- :class:`ArrivalGate` is what every owner of a filtered reader asks: which of the reader's filter
+  versions the writers are proven to apply. The parameter event handler waits on it in a blocking
+  loop (:meth:`ArrivalGate.wait`); the action client polls it from a timer of its own callback
+  group (:meth:`ArrivalGate.begin`, :meth:`ArrivalGate.poll`), while its goal requests wait in
+  :class:`cft_action._held_goals.HeldGoals`.
 """
 
 from __future__ import annotations
 
-from typing import Any, Optional, Sequence
+import time
+from typing import Any, Callable, Mapping, NamedTuple, Optional, Sequence
 
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, qos_profile_services_default
 
 from cft_action._rclpy_compat import new_rcl_client
 
-__all__ = ['GUID_PREFIX_LEN', 'ServiceProbe', 'node_participant', 'participant_of']
+__all__ = ['ArrivalGate', 'ArrivalProof', 'GUID_PREFIX_LEN', 'ProbeTarget', 'RemotePublishers',
+           'ServiceProbe', 'Targets', 'node_participant', 'participant_of']
 
 #: The length of a GUID prefix, which names the participant, at the start of an endpoint GID.
 GUID_PREFIX_LEN = 12
@@ -34,6 +42,13 @@ GUID_PREFIX_LEN = 12
 #: repeated request is harmless.
 PROBE_FIRST_RESEND_S = 0.02
 PROBE_MAX_RESEND_S = 0.5
+
+#: How long a proof probes one service of a participant before it tries the participant's next one
+#: (a node that is not spun, or whose server has not matched the probe's client yet).
+PROBE_TURN_S = 2.0
+
+#: How often :meth:`ArrivalGate.wait` polls its proof.
+WAIT_POLL_S = 0.01
 
 
 def participant_of(endpoint_gid: Any) -> bytes:
@@ -109,3 +124,207 @@ class ServiceProbe:
     def destroy(self) -> None:
         """Destroy the probe's client."""
         self._client.destroy_when_not_in_use()
+
+
+class RemotePublishers:
+    """The publishers of a topic in participants other than the node's own.
+
+    :param node: The node whose participant is "own".
+    :param topic: The topic of the publishers.
+    :param own_topics: Topics on which the node has an endpoint, to find its participant by.
+    """
+
+    def __init__(self, node: Node, topic: str, own_topics: Sequence[str]) -> None:
+        self._node = node
+        self._topic = topic
+        self._own_topics = own_topics
+        self._own: Optional[bytes] = None
+
+    def own(self) -> Optional[bytes]:
+        """The node's participant, or None while the graph does not show it yet."""
+        if self._own is None:
+            self._own = node_participant(self._node, self._own_topics)
+        return self._own
+
+    def by_participant(self) -> dict[bytes, list[Any]]:
+        """Each other participant's publishers (``TopicEndpointInfo``), in the graph's order."""
+        own = self.own()
+        found: dict[bytes, list[Any]] = {}
+        for info in self._node.get_publishers_info_by_topic(self._topic):
+            participant = participant_of(info.endpoint_gid)
+            if participant != own:
+                found.setdefault(participant, []).append(info)
+        return found
+
+    def any(self) -> bool:
+        """Whether a publisher may be in another participant: True while the own one is unknown."""
+        return self.own() is None or bool(self.by_participant())
+
+
+class ProbeTarget(NamedTuple):
+    """A service whose reply proves arrival: its type, name, a harmless request and the QoS."""
+
+    srv_type: Any
+    service_name: str
+    request: Any
+    qos_profile: Optional[QoSProfile] = None
+
+
+#: Each participant to hear from, mapped to the services that can answer for it, tried in turn.
+#: An empty list keeps the participant pending (its nodes' names are not known yet).
+Targets = Callable[[], Mapping[bytes, Sequence[ProbeTarget]]]
+
+
+class ArrivalProof:
+    """One proof of arrival: probes created after a change, polled until every participant answered.
+
+    The participants are asked anew at each poll, so one that appears meanwhile is waited for too.
+
+    :param node: The node whose participant changed the filter.
+    :param targets: The participants to hear from, and their services.
+    :param version: The filter version that an answer proves.
+    """
+
+    def __init__(self, node: Node, targets: Targets, version: int) -> None:
+        self.version = version
+        self.polled_since: Optional[float] = None
+        self._node = node
+        self._targets = targets
+        self._probes: dict[str, tuple[bytes, ServiceProbe]] = {}  # service -> (participant, probe)
+        self._turns: dict[bytes, tuple[int, float]] = {}  # participant -> (service index, since)
+        self._answered: set[bytes] = set()
+        # Created at once, not at the first poll: discovery of the probes' clients starts now.
+        self._probe_pending(time.monotonic(), send=False)
+
+    def poll(self, now: float) -> bool:
+        """Take the replies that came, send or resend the requests; True once all have answered.
+
+        :param now: ``time.monotonic()``.
+        """
+        if self.polled_since is None:
+            self.polled_since = now
+        for participant, probe in self._probes.values():
+            if participant not in self._answered and probe.answered():
+                self._answered.add(participant)
+        return not self._probe_pending(now, send=True)
+
+    def destroy(self) -> None:
+        """Destroy the probes' clients."""
+        for _, probe in self._probes.values():
+            probe.destroy()
+        self._probes.clear()
+
+    def _probe_pending(self, now: float, *, send: bool) -> bool:
+        """Probe each participant that has not answered, on its service of the turn."""
+        pending = {participant: services for participant, services in self._targets().items()
+                   if participant not in self._answered}
+        for participant, services in pending.items():
+            if not services:
+                continue
+            index, since = self._turns.setdefault(participant, (0, now))
+            if now - since >= PROBE_TURN_S and len(services) > 1:
+                index, since = index + 1, now
+                self._turns[participant] = (index, since)
+            target = services[index % len(services)]
+            if target.service_name not in self._probes:
+                self._probes[target.service_name] = (participant, ServiceProbe(
+                    self._node, target.srv_type, target.service_name, target.request,
+                    target.qos_profile))
+            if send:
+                self._probes[target.service_name][1].send_if_due(now)
+        return bool(pending)
+
+
+class ArrivalGate:
+    """Which versions of a reader's filter the writers of other processes are proven to apply.
+
+    A version is the reader's update count (``FilteredReader.updates``): 0 is the filter the reader
+    was created with, which a writer receives with the match itself and so needs no proof; version
+    ``n`` is proven by a proof begun after the ``n``-th update.
+
+    Its owner serializes the calls (it holds its reader's lock), except :meth:`wait`, which takes
+    ``lock`` only to record the outcome.
+
+    :param node: The node whose participant changed the filter.
+    :param targets: The participants to hear from, and their services.
+    :param lock: The owner's lock.
+    """
+
+    def __init__(self, node: Node, targets: Targets, lock: Any) -> None:
+        self._node = node
+        self._targets = targets
+        self._lock = lock
+        self._confirmed = 0
+        self._proof: Optional[ArrivalProof] = None
+        self.timeouts = 0
+
+    @property
+    def confirmed(self) -> int:
+        """The latest version proven to have arrived."""
+        return self._confirmed
+
+    def is_confirmed(self, version: int) -> bool:
+        """Whether ``version`` is proven to have arrived."""
+        return version <= self._confirmed
+
+    # --- polled, from the owner's timer ----------------------------------------------------------
+
+    @property
+    def proving(self) -> bool:
+        """Whether a proof begun with :meth:`begin` is running."""
+        return self._proof is not None
+
+    def begin(self, version: int) -> None:
+        """Begin a proof of ``version`` now, unless one is running."""
+        if self._proof is None:
+            self._proof = ArrivalProof(self._node, self._targets, version)
+
+    def poll(self, now: float, timeout: float) -> Optional[bool]:
+        """Poll the running proof: True once it came, False once it timed out, else None.
+
+        Either outcome ends the proof; one that came confirms its version, one that timed out is
+        counted in :attr:`timeouts`.
+
+        :param now: ``time.monotonic()``.
+        :param timeout: Seconds that the proof may take, from its first poll: a caller that spins
+            only later gives it no chance before.
+        """
+        proof = self._proof
+        if proof is None:
+            return None
+        came = proof.poll(now)
+        if came:
+            self._confirmed = max(self._confirmed, proof.version)
+        elif proof.polled_since is not None and now - proof.polled_since >= timeout:
+            self.timeouts += 1
+        else:
+            return None
+        self.end()
+        return came
+
+    def end(self) -> None:
+        """Drop the running proof, if any."""
+        if self._proof is not None:
+            self._proof.destroy()
+            self._proof = None
+
+    # --- waited for, in the caller's thread ------------------------------------------------------
+
+    def wait(self, version: int, timeout_sec: Optional[float]) -> bool:
+        """Block until a proof of ``version``, begun now, came; it is then confirmed.
+
+        :param timeout_sec: Seconds to wait; forever if ``None`` or negative.
+        :return: False on timeout.
+        """
+        proof = ArrivalProof(self._node, self._targets, version)
+        try:
+            while not proof.poll(time.monotonic()):
+                if (timeout_sec is not None and timeout_sec >= 0 and proof.polled_since is not None
+                        and time.monotonic() - proof.polled_since >= timeout_sec):
+                    return False
+                time.sleep(WAIT_POLL_S)
+        finally:
+            proof.destroy()
+        with self._lock:
+            self._confirmed = max(self._confirmed, version)
+        return True

@@ -70,7 +70,9 @@ class GoalFilterPlan:
         self._reserved: list[bytes] = []      # generated UUIDs announced, not yet used
         self._applied: frozenset[bytes] = frozenset()  # prefixes in the expression in force
         self._added_in: dict[bytes, int] = {}  # prefix in force -> the revision that added it
-        self.revision = 0  # expressions made so far; the initial one is revision 1
+        # The version of the latest expression: 0 for the initial one, n for the n-th update after
+        # it. Applied one update each, it is the reader's update count (cft_action.arrival).
+        self.revision = -1
         self._generated: set[bytes] = set()   # UUIDs this plan drew itself, matched by prefix
 
     # --- UUIDs -----------------------------------------------------------------------------------
@@ -129,17 +131,17 @@ class GoalFilterPlan:
         self._live[goal_uuid] = prefix
         return prefix not in self._applied
 
-    def revision_matching(self, goal_uuid: bytes) -> int:
-        """The revision of the expression that first matched this goal, or 0 if none does.
+    def revision_matching(self, goal_uuid: bytes) -> Optional[int]:
+        """The revision of the expression that first matched this goal, or None if none does.
 
-        The initial expression (revision 1) reaches every writer with the reader itself; a later
+        The initial expression (revision 0) reaches every writer with the reader itself; a later
         one travels by discovery, so a goal matched only by it must wait until the writer has it.
         """
         if self.tag is not None and goal_uuid.startswith(self.tag):
-            return 1
+            return 0
         # A term is a generated UUID's first TERM_BYTES bytes, or a supplied UUID whole.
         return min((self._added_in[prefix] for prefix in (goal_uuid[:TERM_BYTES], goal_uuid)
-                    if prefix in self._added_in), default=0)
+                    if prefix in self._added_in), default=None)
 
     def finish(self, goal_uuid: bytes) -> None:
         """Forget a goal: its term is dropped with the next update or shrink."""

@@ -52,14 +52,9 @@ nodes publish parameter events often, run them under the guard.
 
 from __future__ import annotations
 
-import threading
-import time
-from collections import Counter
-from typing import Callable, NamedTuple, Optional, Sequence, Union
+from typing import Callable, Optional, Sequence, Union
 
-import rclpy
 from rcl_interfaces.msg import ParameterEvent
-from rcl_interfaces.srv import GetParameterTypes
 from rclpy.callback_groups import CallbackGroup
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
@@ -71,112 +66,23 @@ from rclpy.parameter_event_handler import (
 )
 from rclpy.qos import qos_profile_parameter_events, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
-from rclpy.subscription import Subscription
 
-from cft_action._filtered_reader import FilteredReader
-from cft_action._rclpy_compat import PromptLogger, set_parameter_event_callbacks
-from cft_action.arrival import node_participant, participant_of, ServiceProbe
-from cft_action.errors import ContentFilterError
-from cft_action.filters import dds_literal, dds_literals, Literal, never_match_on
-from cft_action.subscription import (
-    ContentFilterOptions,
-    create_filtered_subscription,
-    is_content_filter_supported,
+from cft_action._parameter_event_filter import (
+    ALL_NODES,
+    NO_NODES,
+    node_filter,
+    PARAMETER_EVENTS_TOPIC,
+    ParameterEventFilter,
+    ParameterEventFilterState,
 )
+from cft_action._rclpy_compat import PromptLogger, set_parameter_event_callbacks
+from cft_action.filters import ContentFilterOptions, Literal
+from cft_action.subscription import is_content_filter_supported
 
 __all__ = [
     'ALL_NODES', 'NO_NODES', 'ParameterEventFilterState', 'ParameterEventHandler',
     'node_filter', 'PARAMETER_EVENTS_TOPIC',
 ]
-
-PARAMETER_EVENTS_TOPIC = '/parameter_events'
-
-#: The field of ``rcl_interfaces/msg/ParameterEvent`` that the filter tests.
-NODE_FIELD = 'node'
-
-#: An expression that every parameter event matches: "all nodes", reachable in place.
-ALL_NODES = f'{NODE_FIELD} = {NODE_FIELD}'
-
-#: An expression that no parameter event matches: "no node", used instead of ``""``, which would
-#: make rmw_fastrtps recreate the DataReader.
-NO_NODES = never_match_on(NODE_FIELD)
-
-#: Fast DDS accepts at most ``%0`` .. ``%99``.
-MAX_EXPRESSION_PARAMETERS = 100
-
-#: How often wait_for_filter polls its probes.
-_PROBE_POLL_S = 0.01
-#: How long wait_for_filter probes one node of a participant before it tries the next one.
-_PROBE_TURN_S = 2.0
-
-_EVENT_CALLBACK_REASON = ('a parameter event callback (add_parameter_event_callback) is registered '
-                          'and needs the events of every node')
-
-
-class ParameterEventFilterState(NamedTuple):
-    """A snapshot of a :class:`ParameterEventHandler`'s filter.
-
-    :ivar mode: ``'nodes'`` (filtered on the watched nodes), ``'all'`` (a parameter event callback
-        needs every event), ``'user'`` (an expression set by
-        :meth:`ParameterEventHandler.set_parameter_event_filter`) or ``'off'`` (no content filter
-        can be used; see ``reason``).
-    :ivar active: whether the filter set on the subscription narrows what it receives.
-    :ivar reason: why the filter is not active; empty when it is.
-    :ivar expression: the filter expression set on the subscription; empty when not active. The
-        publishers apply it once discovery has brought it to them: see ``confirmed``.
-    :ivar expression_parameters: its parameters, as DDS literals; empty when not active.
-    :ivar updates: filter changes sent after the subscription was created; each one reaches every
-        ``/parameter_events`` writer in the domain.
-    :ivar watched_nodes: fully qualified names of the nodes that parameter callbacks watch, sorted.
-    :ivar events_received: parameter events taken by the subscription, whichever callbacks they
-        reached.
-    :ivar confirmed: whether the publishers are known to apply the filter set on the subscription.
-        True for the filter the subscription was created with, which a publisher receives with the
-        match itself. After a change it is False: the change travels by discovery and the
-        middleware acknowledges nothing, so until it arrives a publisher still applies its previous
-        filter, narrower or wider, and drops what that one rejects (in mode ``'all'`` too).
-        :meth:`ParameterEventHandler.wait_for_filter` proves the arrival and sets it back to True.
-    """
-
-    mode: str
-    active: bool
-    reason: str
-    expression: str
-    expression_parameters: tuple[str, ...]
-    updates: int
-    watched_nodes: tuple[str, ...]
-    events_received: int
-    confirmed: bool
-
-
-def _is_quotable(node_name: str) -> bool:
-    try:
-        dds_literal(node_name)
-    except ValueError:
-        return False
-    return True
-
-
-def node_filter(node_names: Sequence[str]) -> ContentFilterOptions:
-    """Return the filter that matches the parameter events of exactly ``node_names``.
-
-    The names are sorted, so that the same set always gives the same expression. Up to 100 names
-    are passed as parameters, ``node = %0 OR node = %1 ...``, each quoted as a DDS literal; beyond
-    Fast DDS's 100 parameters, the quoted names are written into the expression itself. No names
-    give :data:`NO_NODES`.
-
-    :param node_names: Fully qualified node names, as in ``ParameterEvent.node``.
-    :raises ValueError: if a name contains a quote character, which no DDS literal can hold (and
-        no ROS node name contains).
-    """
-    names = sorted(set(node_names))
-    if not names:
-        return ContentFilterOptions(NO_NODES, [])
-    literals = dds_literals(names)
-    if len(names) <= MAX_EXPRESSION_PARAMETERS:
-        return ContentFilterOptions(
-            ' OR '.join(f'{NODE_FIELD} = %{i}' for i in range(len(names))), literals)
-    return ContentFilterOptions(' OR '.join(f'{NODE_FIELD} = {lit}' for lit in literals), [])
 
 
 class ParameterEventHandler(_RclpyParameterEventHandler):
@@ -255,99 +161,12 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         self._rclpy_callbacks = set_parameter_event_callbacks(self)  # what its methods use
 
         self._cft_logger = PromptLogger(node.get_logger().get_child('cft_action'))
-        # The reader's lock guards the filter bookkeeping and the rmw calls. It is never taken
-        # while the Callbacks mutex is held, and the event path takes only _received_lock, so a
-        # callback that reads the state cannot deadlock against an add or remove in another thread.
-        self._reader = FilteredReader(
-            self._cft_logger, match_all=ALL_NODES,
-            unfiltered='parameter event filter not used, all parameter events are received as '
-                       'with rclpy')
-        self._received_lock = threading.Lock()
-        self._received = 0
-        self._watched: Counter[str] = Counter()  # node name -> parameter callbacks watching it
-        self._event_callback_count = 0
-        self._user_filter: Optional[ContentFilterOptions] = None
-        self._confirmed_updates = 0  # the reader's updates when wait_for_filter last proved them
-        self._state = ParameterEventFilterState('nodes', False, '', '', (), 0, (), 0, True)
-
-        self.parameter_event_subscription = self._subscribe(
-            callback_group, event_callbacks, qos_overriding_options, raw)
-        with self._reader.lock:
-            self._publish_state()
-
-    # --- subscription and filter ----------------------------------------------------------------
-
-    def _subscribe(self, callback_group: Optional[CallbackGroup],
-                   event_callbacks: Optional[SubscriptionEventCallbacks],
-                   qos_overriding_options: Optional[QoSOverridingOptions],
-                   raw: bool) -> Subscription:
-        if not is_content_filter_supported(self.node):
-            self._reader.fall_back(
-                f'the rmw implementation {rclpy.get_rmw_implementation_identifier()} has no '
-                'content filter')
-        else:
-            try:
-                subscription = create_filtered_subscription(
-                    self.node, ParameterEvent, PARAMETER_EVENTS_TOPIC, self._on_event,
-                    self.qos_profile, NO_NODES, callback_group=callback_group,
-                    event_callbacks=event_callbacks,
-                    qos_overriding_options=qos_overriding_options, raw=raw)
-            except ContentFilterError as e:
-                self._reader.fall_back(f'installing the filter failed: {e}')
-            else:
-                with subscription.handle:
-                    self._reader.adopt(subscription.handle, subscription.handle.pointer,
-                                       PARAMETER_EVENTS_TOPIC, ContentFilterOptions(NO_NODES, []))
-                return subscription
-        return self.node.create_subscription(
-            ParameterEvent, PARAMETER_EVENTS_TOPIC, self._on_event, self.qos_profile,
-            callback_group=callback_group, event_callbacks=event_callbacks,
-            qos_overriding_options=qos_overriding_options, raw=raw)
-
-    def _on_event(self, event: ParameterEvent) -> None:
-        with self._received_lock:
-            self._received += 1
-        self._rclpy_callbacks.event_callback(event)
-
-    def _wanted(self) -> tuple[str, str, ContentFilterOptions]:
-        """Return ``(mode, reason, filter)`` for the callbacks registered now."""
-        if self._user_filter is not None:
-            return 'user', '', self._user_filter
-        if self._event_callback_count:
-            return 'all', _EVENT_CALLBACK_REASON, ContentFilterOptions(ALL_NODES, [])
-        return 'nodes', '', node_filter([n for n in self._watched if _is_quotable(n)])
-
-    def _refresh(self) -> None:
-        """Bring the middleware's filter in line with the callbacks, if it differs from them."""
-        with self._reader.lock:
-            if self._reader.filter is not None:
-                _, _, wanted = self._wanted()
-                try:
-                    self._change(wanted)
-                except ContentFilterError as e:
-                    self._reader.abandon(f'a filter update failed: {e}')
-            self._publish_state()
-
-    def _change(self, options: ContentFilterOptions) -> None:
-        # In place, from one non-empty expression to another: safe under a spinning executor.
-        if self._reader.change(options):
-            self._cft_logger.debug(
-                f'parameter event filter: {options.filter_expression!r} '
-                f'{options.expression_parameters} (update {self._reader.updates})')
-
-    def _publish_state(self) -> None:
-        common = self._reader.state
-        if self._reader.filter is None:
-            mode, reason = 'off', common.reason
-        else:
-            mode, reason, _ = self._wanted()
-        shown = mode not in ('all', 'off')
-        self._state = ParameterEventFilterState(
-            mode=mode, active=shown, reason=reason,
-            expression=common.expression if shown else '',
-            expression_parameters=common.expression_parameters if shown else (),
-            updates=common.updates, watched_nodes=tuple(sorted(self._watched)), events_received=0,
-            confirmed=self._confirmed_updates == common.updates)
+        self._filter = ParameterEventFilter(node, self._cft_logger)
+        self.parameter_event_subscription = self._filter.subscribe(
+            node, self._rclpy_callbacks.event_callback, is_content_filter_supported(node),
+            qos_profile=self.qos_profile, callback_group=callback_group,
+            event_callbacks=event_callbacks, qos_overriding_options=qos_overriding_options,
+            raw=raw)
 
     # --- the rclpy API ----------------------------------------------------------------------------
 
@@ -375,15 +194,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             so that the event_callback can be later removed.
         """
         handle = super().add_parameter_callback(parameter_name, node_name, callback)
-        with self._reader.lock:
-            if not _is_quotable(handle.node_name):
-                # A quote cannot be in a DDS literal, nor in a ROS node name: no event can ever
-                # come from this node, so leaving it out of the filter loses nothing.
-                self._cft_logger.warning(
-                    f'parameter callback for node {handle.node_name!r}: no ROS node has this name '
-                    '(it contains a quote), so the callback will never be called')
-            self._watched[handle.node_name] += 1
-            self._refresh()
+        self._filter.watch(handle.node_name)
         return handle
 
     def remove_parameter_callback(
@@ -399,11 +210,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         :param handle: ParameterCallbackHandle of a callback to be removed
         """
         super().remove_parameter_callback(handle)  # raises, as rclpy, for an unknown handle
-        with self._reader.lock:
-            self._watched[handle.node_name] -= 1
-            if self._watched[handle.node_name] <= 0:
-                del self._watched[handle.node_name]
-            self._refresh()
+        self._filter.unwatch(handle.node_name)
 
     def add_parameter_event_callback(
         self,
@@ -427,14 +234,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             so that the event_callback can be later removed.
         """
         handle = super().add_parameter_event_callback(callback)
-        with self._reader.lock:
-            self._event_callback_count += 1
-            if self._event_callback_count == 1 and self._reader.filter is not None \
-                    and self._user_filter is None:
-                self._cft_logger.info(
-                    'parameter event callback added: the parameter event handler now receives '
-                    'the events of every node, until the last such callback is removed')
-            self._refresh()
+        self._filter.count_event_callbacks(+1)
         return handle
 
     def remove_parameter_event_callback(
@@ -450,15 +250,11 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         :param handle: ParameterEventCallbackHandle of a callback to be removed
         """
         super().remove_parameter_event_callback(handle)
-        with self._reader.lock:
-            self._event_callback_count -= 1
-            self._refresh()
+        self._filter.count_event_callbacks(-1)
 
     def destroy(self) -> None:
         """Destroy the subscription to ``/parameter_events``."""
-        with self._reader.lock:
-            self._reader.detach('the handler was destroyed')  # no filter changes from now on
-            self._publish_state()
+        self._filter.detach()
         super().destroy()
 
     # --- filter API -------------------------------------------------------------------------------
@@ -466,9 +262,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
     @property
     def parameter_event_filter_state(self) -> ParameterEventFilterState:
         """The filter's mode, whether it is active and why not, and its counters (read-only)."""
-        with self._received_lock:
-            received = self._received
-        return self._state._replace(events_received=received)
+        return self._filter.state
 
     def set_parameter_event_filter(self, filter_expression: str,
                                    expression_parameters: Sequence[Literal] = ()) -> None:
@@ -488,33 +282,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             :attr:`parameter_event_filter_state`), or if the expression or a parameter is
             rejected. The message names the expression; the previous filter stays in force.
         """
-        with self._reader.lock:
-            if self._reader.filter is None:
-                raise ContentFilterError(
-                    f'cannot set parameter event filter {filter_expression!r}: the handler has no '
-                    f'content filter: {self._reader.reason}')
-            if not filter_expression:
-                self._user_filter = None
-                self._refresh()
-                return
-            try:
-                options = ContentFilterOptions(filter_expression,
-                                               dds_literals(expression_parameters))
-            except (TypeError, ValueError) as e:
-                raise ContentFilterError(
-                    f'parameter event filter {filter_expression!r}: bad expression parameter: '
-                    f'{e}') from e
-            previous = self._reader.filter
-            try:
-                self._change(options)
-            except ContentFilterError as e:
-                # An in-place change that rmw_fastrtps rejects leaves the reader as it was.
-                raise ContentFilterError(
-                    f'parameter event filter {filter_expression!r} was rejected, the filter '
-                    f'stays {previous.filter_expression!r}: {e}', function=e.function,
-                    ret=e.ret, rcl_error=e.rcl_error) from e
-            self._user_filter = options
-            self._publish_state()
+        self._filter.set_user(filter_expression, expression_parameters)
 
     def configure_nodes_filter(self, node_names: Optional[Sequence[str]] = None) -> bool:
         """
@@ -528,17 +296,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         :return: ``True`` if the filter is set; ``False`` if it was refused, which is logged with
             the reason.
         """
-        try:
-            if node_names:
-                options = node_filter(node_names)
-                self.set_parameter_event_filter(options.filter_expression,
-                                                options.expression_parameters)
-            else:
-                self.set_parameter_event_filter('')
-        except (ContentFilterError, ValueError) as e:
-            self._cft_logger.warning(f'configure_nodes_filter({node_names!r}) failed: {e}')
-            return False
-        return True
+        return self._filter.configure_nodes(node_names)
 
     def get_parameter_event_filter(self) -> ContentFilterOptions:
         """
@@ -547,7 +305,7 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         :return: ``(filter_expression, expression_parameters)``; ``('', [])`` when the
             subscription has no content filter.
         """
-        return self._reader.read()
+        return self._filter.reader.read()
 
     def wait_for_filter(self, timeout_sec: Optional[float] = None) -> bool:
         """
@@ -573,79 +331,4 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
             :attr:`parameter_event_filter_state` has ``confirmed=True`` until the next change.
             ``False`` on timeout, if the filter changed meanwhile, or if the handler was destroyed.
         """
-        deadline = None
-        if timeout_sec is not None and timeout_sec >= 0:
-            deadline = time.monotonic() + timeout_sec
-        with self._reader.lock:
-            if self._reader.ended:
-                return False
-            target = self._reader.updates
-            if self._confirmed_updates == target:
-                return True
-        probes: dict[str, tuple[bytes, ServiceProbe]] = {}  # service -> (participant, probe)
-        turns: dict[bytes, tuple[int, float]] = {}  # participant -> (node index, since when)
-        answered: set[bytes] = set()
-        own = node_participant(self.node, (PARAMETER_EVENTS_TOPIC, '/rosout'))
-        try:
-            while True:
-                now = time.monotonic()
-                pending = {participant: services
-                           for participant, services in self._probe_services(own).items()
-                           if participant not in answered}
-                for participant, services in pending.items():
-                    self._probe(participant, services, probes, turns, now)
-                for participant, probe in probes.values():
-                    if probe.answered():
-                        answered.add(participant)
-                if not pending:
-                    break
-                if deadline is not None and now >= deadline:
-                    return False
-                time.sleep(_PROBE_POLL_S)
-        finally:
-            for _, probe in probes.values():
-                probe.destroy()
-        with self._reader.lock:
-            if self._reader.ended or self._reader.updates != target:
-                return False
-            self._confirmed_updates = target
-            self._publish_state()
-        return True
-
-    def _probe_services(self, own: Optional[bytes]) -> dict[bytes, list[str]]:
-        """Map each participant but ``own`` with a parameter event publisher to its nodes' services.
-
-        A participant whose nodes' names are not known yet maps to no service: it stays pending.
-        """
-        services: dict[bytes, list[str]] = {}
-        for info in self.node.get_publishers_info_by_topic(PARAMETER_EVENTS_TOPIC):
-            participant = participant_of(info.endpoint_gid)
-            if participant == own:
-                continue
-            candidates = services.setdefault(participant, [])
-            if info.node_name.startswith('_NODE_') or info.node_namespace.startswith('_NODE_'):
-                continue  # rmw's placeholder while the node's name is not yet discovered
-            service = f"{info.node_namespace.rstrip('/')}/{info.node_name}/get_parameter_types"
-            if service not in candidates:
-                candidates.append(service)
-        return services
-
-    def _probe(self, participant: bytes, services: list[str],
-               probes: dict[str, tuple[bytes, ServiceProbe]],
-               turns: dict[bytes, tuple[int, float]], now: float) -> None:
-        """Send, or send again, the probe request to one of ``participant``'s ``services``.
-
-        A node whose service has not replied for _PROBE_TURN_S (not spun, or its server has not
-        matched the client yet) hands the probe on to the participant's next node.
-        """
-        if not services:
-            return
-        index, since = turns.setdefault(participant, (0, now))
-        if now - since >= _PROBE_TURN_S and len(services) > 1:
-            index, since = index + 1, now
-            turns[participant] = (index, since)
-        service = services[index % len(services)]
-        if service not in probes:
-            probes[service] = (participant, ServiceProbe(
-                self.node, GetParameterTypes, service, GetParameterTypes.Request()))
-        probes[service][1].send_if_due(now)
+        return self._filter.wait(timeout_sec)

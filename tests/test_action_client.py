@@ -16,6 +16,7 @@ from rclpy.task import Future
 from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
+import cft_action._rcl
 import cft_action.client
 from cft_action import ActionClient, guard
 from cft_action.client import FINISHED_GOAL_GRACE
@@ -402,7 +403,7 @@ def test_multithreaded_executor_with_goals_sent_from_another_thread(server):
 
 def test_fallback_through_an_unavailable_binding(ros, server, monkeypatch):
     action, _ = server
-    monkeypatch.setattr(cft_action.client._rcl, 'action_feedback_subscription',
+    monkeypatch.setattr(cft_action._rcl, 'action_feedback_subscription',
                         lambda pointer, name: (None, 'layout check failed: forced by the test'))
     client = make_client(ros, action)
     state = client.feedback_filter_state

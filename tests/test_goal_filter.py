@@ -104,26 +104,29 @@ def test_reserve_is_dropped_before_refusing():
 
 
 def test_revisions_tell_which_update_first_matched_a_goal():
-    """A goal matched only by a later expression must wait for that update at the server."""
+    """A goal matched only by a later expression must wait for that update at the server.
+
+    The initial expression is revision 0, and the n-th update after it revision n: the reader's
+    update count, which the arrival gate proves."""
     plan = GoalFilterPlan('goals', reserve=2)
     plan.initial()
-    assert plan.revision == 1
+    assert plan.revision == 0
     reserved = [plan.uuid_for_feedback() for _ in range(2)]
-    assert [plan.revision_matching(u) for u in reserved] == [1, 1]
+    assert [plan.revision_matching(u) for u in reserved] == [0, 0]
     assert not any(plan.watch(u) for u in reserved)
     fresh = plan.uuid_for_feedback()  # the reserve is used up
-    assert plan.revision_matching(fresh) == 0 and plan.watch(fresh)
+    assert plan.revision_matching(fresh) is None and plan.watch(fresh)
     plan.grow()
-    assert plan.revision == 2 and plan.revision_matching(fresh) == 2
-    assert plan.revision_matching(reserved[0]) == 1  # a term keeps the revision that added it
+    assert plan.revision == 1 and plan.revision_matching(fresh) == 1
+    assert plan.revision_matching(reserved[0]) == 0  # a term keeps the revision that added it
     plan.finish(fresh)
     plan.shrink()
-    assert plan.revision == 3 and plan.revision_matching(fresh) == 0
+    assert plan.revision == 2 and plan.revision_matching(fresh) is None
 
     client = GoalFilterPlan('client')
     client.initial()
-    assert client.revision_matching(client.tagged_uuid()) == 1
+    assert client.revision_matching(client.tagged_uuid()) == 0
     foreign = uuid.uuid4().bytes
     assert client.watch(foreign)
     client.grow()
-    assert client.revision_matching(foreign) == 2
+    assert client.revision_matching(foreign) == 1

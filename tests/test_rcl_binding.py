@@ -37,13 +37,12 @@ def test_layout_check_finds_the_result_client_and_takes_nothing_from_empty_queue
     client = ActionClient(ros.node, Fibonacci, 'layout_check', feedback_filter='off')
     pointer = client._client_handle.pointer
     found, reason = _rcl.action_result_client(pointer, ros.node.resolve_topic_name('layout_check'))
-    assert found and reason == '' and found == client._result_client_ptr
+    assert found and reason == '' and found == client._entities.result_client
     missing, reason = _rcl.action_result_client(pointer, '/another_action')
     assert missing is None and 'layout check failed' in reason
     with client:
-        assert _rcl.take_response(found, client._result_support) == (None, None, 0)
-        assert _rcl.take_message(client._feedback_subscription_ptr,
-                                 client._feedback_support) == (None, 0)
+        assert client._entities.take_result() == (None, None, 0)
+        assert client._entities.take_feedback() == (None, 0)
     client.destroy()
 
 
@@ -51,9 +50,11 @@ def test_a_client_whose_entities_cannot_be_located_keeps_rclpy_takes(ros, monkey
     monkeypatch.setattr(_rcl, 'action_result_client',
                         lambda pointer, name: (None, 'layout check failed: forced by the test'))
     client = ActionClient(ros.node, Fibonacci, 'layout_check')
-    assert client._result_client_ptr is None
+    assert client._entities.result_client is None and not client._entities.takes_here
     # Without sample info there is no ordering evidence: feedback after a result is dropped.
-    client._result_stamps[b'g' * 16] = 0
-    assert client._published_after_result(b'g' * 16, 0)
-    assert not client._published_after_result(b'h' * 16, 0)
+    for goal_uuid in (b'g' * 16, b'h' * 16):
+        client._feedback_callbacks[goal_uuid] = lambda _: None
+    client._finished_goals.result(b'g' * 16, 0)
+    assert client._finished_goals.dropped(b'g' * 16, 0)
+    assert not client._finished_goals.dropped(b'h' * 16, 0)
     client.destroy()

@@ -1,0 +1,155 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""The action client's feedback filter: its goal plan and its filtered reader, kept in step.
+
+:class:`cft_action.goal_filter.GoalFilterPlan` decides which expression the goals need, and
+:class:`cft_action._filtered_reader.FilteredReader` is the one way to set it; this object applies
+each of the plan's expressions as one update of the reader, so the plan's revision is the reader's
+update count, the version that :class:`cft_action.arrival.ArrivalGate` proves. Where a change
+fails, the filter is abandoned for good and the client behaves as plain rclpy.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable, ContextManager, Optional
+
+from cft_action._filtered_reader import FilteredReader
+from cft_action._rclpy_compat import PromptLogger
+from cft_action.filters import ContentFilterOptions, MATCH_ALL
+from cft_action.goal_filter import ExpressionTooLong, GoalFilterPlan, random_uuid4
+
+__all__ = ['FeedbackFilter']
+
+
+class FeedbackFilter:
+    """The plan of an action client's feedback filter, and the reader that applies it.
+
+    :param logger: The client's logger.
+    :param mode: ``'client'``, ``'goals'`` or ``'off'``.
+    :param uuid_class: Filter with the library's own filter class (``writer_filtering='guarded'``).
+    """
+
+    def __init__(self, logger: PromptLogger, mode: str, *, uuid_class: bool) -> None:
+        self.mode = mode
+        self.reader = FilteredReader(
+            logger, match_all=MATCH_ALL, uuid_class=uuid_class,
+            unfiltered='feedback filter not used, all feedback is received as with rclpy')
+        self.plan: Optional[GoalFilterPlan] = None  # None: the filter is not (or no longer) used
+        self.installed = False  # whether install() ran
+        self._logger = logger
+        self._logged_explicit_uuid = False
+        self._logged_unguarded = False
+
+    def install(self, handle: ContextManager[Any], pointer: Optional[int], topic: str,
+                pointer_reason: str, cft_supported: bool) -> None:
+        """Set the first filter, before any executor can see the feedback subscription.
+
+        :param pointer: The feedback subscription's ``rcl_subscription_t *``; None if not found.
+        :param pointer_reason: Why it was not found.
+        :param cft_supported: Whether the rmw implementation has content filters.
+        """
+        self.installed = True
+        if self.mode == 'off':
+            self.reader.fall_back('feedback_filter is off', log=False)
+        elif not cft_supported:
+            self.reader.fall_back('the rmw implementation has no content filter')
+        elif pointer is None:
+            self.reader.fall_back(pointer_reason)
+        else:
+            plan = GoalFilterPlan(self.mode)
+            if self.reader.install(handle, pointer, topic,
+                                   ContentFilterOptions(plan.initial(), [])):
+                self.plan = plan
+
+    def uuid_for(self, feedback: bool) -> Optional[bytes]:
+        """A fresh UUID: one the filter matches for a goal with feedback, else one it does not.
+
+        None when there is no filter (rclpy then generates one).
+        """
+        if self.plan is None:
+            return None
+        return self.plan.uuid_for_feedback() if feedback else self.plan.untagged_uuid()
+
+    def new_goal_uuid(self) -> bytes:
+        """A fresh UUID that the filter already matches; a random one without a filter."""
+        return self.plan.uuid_for_feedback() if self.plan else random_uuid4()
+
+    def watch(self, goal_uuid: bytes) -> int:
+        """Match this goal's feedback, growing the filter if it must.
+
+        :return: The version of the filter that first matched the goal; 0 when the installed
+            filter does, or when there is no filter.
+        """
+        if self.plan is None:
+            return 0
+        if self.plan.watch(goal_uuid):
+            if self.plan.mode == 'client' and not self._logged_explicit_uuid:
+                self._logged_explicit_uuid = True
+                self._logger.info(
+                    "a goal_uuid without this client's tag is added to the feedback filter, which "
+                    'costs a filter update at the server; ActionClient.new_goal_uuid() avoids it')
+            self._update(self.plan.grow)
+        matched = self.plan.revision_matching(goal_uuid) if self.plan is not None else None
+        return matched or 0
+
+    def release(self, goal_uuids: list[bytes], idle: bool) -> bool:
+        """Drop the terms of released goals; shrink once ``idle``.
+
+        :return: Whether the filter still has terms of finished goals, to drop later.
+        """
+        if self.plan is None:
+            return False
+        for goal_uuid in goal_uuids:
+            self.plan.finish(goal_uuid)
+        # One shrink once the client is idle, not one per release: each update is an event at the
+        # server's writer.
+        if idle:
+            self._update(self.plan.shrink)
+        return self.plan is not None and self.plan.has_stale_terms()
+
+    def abandon(self, reason: str) -> None:
+        """Let all feedback through, for good."""
+        self.plan = None
+        self.reader.abandon(reason)
+
+    def _update(self, make_expression: Callable[[], Optional[str]]) -> None:
+        """Change the filter in place; on failure, fall back to receiving all feedback."""
+        try:
+            expression = make_expression()
+        except ExpressionTooLong as e:
+            self.abandon(f'a filter update failed: {e}')
+            return
+        if expression is not None:
+            self.reader.update(ContentFilterOptions(expression, []))
+            if self.reader.filter is None:
+                self.plan = None
+
+    def filtered_in(self, feedback_taken: int) -> str:
+        """Where other goals' feedback is dropped; see :class:`cft_action.FeedbackFilterState`."""
+        if self.reader.filter is None:
+            return 'none'
+        if not self.reader.uuid_class:
+            return 'writer'  # DDS-SQL: every Fast DDS writer filters (up to its reader limit)
+        verdicts = self.reader.reader_verdicts
+        if verdicts is None:
+            return 'unknown'
+        # A guarded writer marks what it sends, so the reader judges only the samples sent in
+        # the moment between a filter change here and its arrival there; an unguarded one marks
+        # nothing, and the reader judges every sample, other goals' included.
+        if verdicts and verdicts >= feedback_taken:
+            return 'reader'
+        return 'writer' if feedback_taken else 'unknown'
+
+    def log_if_unguarded(self, feedback_taken: int) -> None:
+        """Say once that the server does not filter for this client, once there is evidence."""
+        if self._logged_unguarded or feedback_taken > 100:
+            return
+        with self.reader.lock:
+            if (self.filtered_in(feedback_taken) != 'reader'
+                    or (self.reader.reader_verdicts or 0) < 10):
+                return
+            self._logged_unguarded = True
+        self._logger.info(
+            "the action server's writer does not filter this client's feedback (the server does "
+            "not run under 'cft-action guard'): other goals' feedback crosses the network to this "
+            "client and its DDS reader drops it before Python. Under the guard the server would "
+            'not send it (README, "What it saves")')

@@ -1,0 +1,343 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""The parameter event handler's filter: the nodes its callbacks watch, and the reader that sets it.
+
+The handler's callbacks decide which expression is wanted (the watched nodes, every node while a
+node-agnostic callback is registered, or the user's own), :class:`FilteredReader` sets it, and an
+:class:`ArrivalGate` proves that the publishers of other processes apply it. See
+:mod:`cft_action.parameter_events` for what is filtered where, and why.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections import Counter
+from typing import Any, Callable, NamedTuple, Optional, Sequence
+
+import rclpy
+from rcl_interfaces.msg import ParameterEvent
+from rcl_interfaces.srv import GetParameterTypes
+from rclpy.node import Node
+from rclpy.subscription import Subscription
+
+from cft_action._filtered_reader import FilteredReader
+from cft_action._rclpy_compat import PromptLogger
+from cft_action.arrival import ArrivalGate, ProbeTarget, RemotePublishers
+from cft_action.errors import ContentFilterError
+from cft_action.filters import (ContentFilterOptions, dds_literal, dds_literals, Literal,
+                                never_match_on)
+from cft_action.subscription import create_filtered_subscription
+
+__all__ = ['ALL_NODES', 'NO_NODES', 'PARAMETER_EVENTS_TOPIC', 'ParameterEventFilter',
+           'ParameterEventFilterState', 'node_filter']
+
+PARAMETER_EVENTS_TOPIC = '/parameter_events'
+
+#: The field of ``rcl_interfaces/msg/ParameterEvent`` that the filter tests.
+NODE_FIELD = 'node'
+
+#: An expression that every parameter event matches: "all nodes", reachable in place.
+ALL_NODES = f'{NODE_FIELD} = {NODE_FIELD}'
+
+#: An expression that no parameter event matches: "no node", used instead of ``""``, which would
+#: make rmw_fastrtps recreate the DataReader.
+NO_NODES = never_match_on(NODE_FIELD)
+
+#: Fast DDS accepts at most ``%0`` .. ``%99``.
+MAX_EXPRESSION_PARAMETERS = 100
+
+_EVENT_CALLBACK_REASON = ('a parameter event callback (add_parameter_event_callback) is registered '
+                          'and needs the events of every node')
+
+
+class ParameterEventFilterState(NamedTuple):
+    """A snapshot of a :class:`ParameterEventHandler`'s filter.
+
+    :ivar mode: ``'nodes'`` (filtered on the watched nodes), ``'all'`` (a parameter event callback
+        needs every event), ``'user'`` (an expression set by
+        :meth:`ParameterEventHandler.set_parameter_event_filter`) or ``'off'`` (no content filter
+        can be used; see ``reason``).
+    :ivar active: whether the filter set on the subscription narrows what it receives.
+    :ivar reason: why the filter is not active; empty when it is.
+    :ivar expression: the filter expression set on the subscription; empty when not active. The
+        publishers apply it once discovery has brought it to them: see ``confirmed``.
+    :ivar expression_parameters: its parameters, as DDS literals; empty when not active.
+    :ivar updates: filter changes sent after the subscription was created; each one reaches every
+        ``/parameter_events`` writer in the domain.
+    :ivar watched_nodes: fully qualified names of the nodes that parameter callbacks watch, sorted.
+    :ivar events_received: parameter events taken by the subscription, whichever callbacks they
+        reached.
+    :ivar confirmed: whether the publishers are known to apply the filter set on the subscription.
+        True for the filter the subscription was created with, which a publisher receives with the
+        match itself. After a change it is False: the change travels by discovery and the
+        middleware acknowledges nothing, so until it arrives a publisher still applies its previous
+        filter, narrower or wider, and drops what that one rejects (in mode ``'all'`` too).
+        :meth:`ParameterEventHandler.wait_for_filter` proves the arrival and sets it back to True.
+    """
+
+    mode: str
+    active: bool
+    reason: str
+    expression: str
+    expression_parameters: tuple[str, ...]
+    updates: int
+    watched_nodes: tuple[str, ...]
+    events_received: int
+    confirmed: bool
+
+
+def is_quotable(node_name: str) -> bool:
+    """Whether a DDS literal can hold the name: no ROS node name has a quote."""
+    try:
+        dds_literal(node_name)
+    except ValueError:
+        return False
+    return True
+
+
+def node_filter(node_names: Sequence[str]) -> ContentFilterOptions:
+    """Return the filter that matches the parameter events of exactly ``node_names``.
+
+    The names are sorted, so that the same set always gives the same expression. Up to 100 names
+    are passed as parameters, ``node = %0 OR node = %1 ...``, each quoted as a DDS literal; beyond
+    Fast DDS's 100 parameters, the quoted names are written into the expression itself. No names
+    give :data:`NO_NODES`.
+
+    :param node_names: Fully qualified node names, as in ``ParameterEvent.node``.
+    :raises ValueError: if a name contains a quote character, which no DDS literal can hold (and
+        no ROS node name contains).
+    """
+    names = sorted(set(node_names))
+    if not names:
+        return ContentFilterOptions(NO_NODES, [])
+    literals = dds_literals(names)
+    if len(names) <= MAX_EXPRESSION_PARAMETERS:
+        return ContentFilterOptions(
+            ' OR '.join(f'{NODE_FIELD} = %{i}' for i in range(len(names))), literals)
+    return ContentFilterOptions(' OR '.join(f'{NODE_FIELD} = {lit}' for lit in literals), [])
+
+
+def parameter_services(publishers: RemotePublishers) -> dict[bytes, list[ProbeTarget]]:
+    """Each other participant with a parameter event publisher, and its nodes' services.
+
+    A participant whose nodes' names are not known yet maps to no service: it stays pending.
+    """
+    services: dict[bytes, list[ProbeTarget]] = {}
+    for participant, infos in publishers.by_participant().items():
+        candidates = services.setdefault(participant, [])
+        for info in infos:
+            if info.node_name.startswith('_NODE_') or info.node_namespace.startswith('_NODE_'):
+                continue  # rmw's placeholder while the node's name is not yet discovered
+            name = f"{info.node_namespace.rstrip('/')}/{info.node_name}/get_parameter_types"
+            if all(target.service_name != name for target in candidates):
+                candidates.append(ProbeTarget(GetParameterTypes, name,
+                                              GetParameterTypes.Request()))
+    return services
+
+
+class ParameterEventFilter:
+    """Which parameter events the handler's subscription lets through, and the proof of arrival.
+
+    Its reader's lock guards every change. It is never taken while rclpy's callback registry's
+    mutex is held, and :attr:`state` is a snapshot read without it, so a callback that reads the
+    state cannot deadlock against an add or remove in another thread.
+
+    :param node: The handler's node.
+    :param logger: The handler's logger.
+    """
+
+    def __init__(self, node: Node, logger: PromptLogger) -> None:
+        self.reader = FilteredReader(
+            logger, match_all=ALL_NODES,
+            unfiltered='parameter event filter not used, all parameter events are received as '
+                       'with rclpy')
+        self._logger = logger
+        self._watched: Counter[str] = Counter()  # node name -> parameter callbacks watching it
+        self._event_callbacks = 0
+        self._user: Optional[ContentFilterOptions] = None
+        publishers = RemotePublishers(node, PARAMETER_EVENTS_TOPIC,
+                                      (PARAMETER_EVENTS_TOPIC, '/rosout'))
+        self._gate = ArrivalGate(node, lambda: parameter_services(publishers), self.reader.lock)
+        self._received_lock = threading.Lock()  # the event path takes only this one
+        self._received = 0
+        self._state = ParameterEventFilterState('nodes', False, '', '', (), 0, (), 0, True)
+
+    @property
+    def state(self) -> ParameterEventFilterState:
+        """The latest snapshot, with the events received so far."""
+        with self._received_lock:
+            received = self._received
+        return self._state._replace(events_received=received)
+
+    def subscribe(self, node: Node, deliver: Callable[[ParameterEvent], None],
+                  cft_supported: bool, **kwargs: Any) -> Subscription:
+        """Create the subscription, filtered on "no node" from the start where the rmw can.
+
+        :param deliver: Hands an event to the handler's callbacks; it is counted first.
+        :param cft_supported: Whether the rmw implementation has content filters.
+        :param kwargs: ``qos_profile``, ``callback_group``, ``event_callbacks``,
+            ``qos_overriding_options`` and ``raw``, as for ``Node.create_subscription``.
+        """
+        qos_profile = kwargs.pop('qos_profile')
+
+        def callback(event: ParameterEvent) -> None:
+            with self._received_lock:
+                self._received += 1
+            deliver(event)
+
+        with self.reader.lock:
+            try:
+                if not cft_supported:
+                    self.reader.fall_back(
+                        f'the rmw implementation {rclpy.get_rmw_implementation_identifier()} has '
+                        'no content filter')
+                else:
+                    try:
+                        subscription = create_filtered_subscription(
+                            node, ParameterEvent, PARAMETER_EVENTS_TOPIC, callback, qos_profile,
+                            NO_NODES, **kwargs)
+                    except ContentFilterError as e:
+                        self.reader.fall_back(f'installing the filter failed: {e}')
+                    else:
+                        with subscription.handle:
+                            self.reader.adopt(subscription.handle, subscription.handle.pointer,
+                                              PARAMETER_EVENTS_TOPIC,
+                                              ContentFilterOptions(NO_NODES, []))
+                        return subscription
+                return node.create_subscription(ParameterEvent, PARAMETER_EVENTS_TOPIC,
+                                                callback, qos_profile, **kwargs)
+            finally:
+                self._publish_state()
+
+    # --- what the callbacks want ----------------------------------------------------------------
+
+    def watch(self, node_name: str) -> None:
+        """A parameter callback watches this node."""
+        with self.reader.lock:
+            if not is_quotable(node_name):
+                # A quote cannot be in a DDS literal, nor in a ROS node name: no event can ever
+                # come from this node, so leaving it out of the filter loses nothing.
+                self._logger.warning(
+                    f'parameter callback for node {node_name!r}: no ROS node has this name '
+                    '(it contains a quote), so the callback will never be called')
+            self._watched[node_name] += 1
+            self._refresh()
+
+    def unwatch(self, node_name: str) -> None:
+        """A parameter callback of this node was removed."""
+        with self.reader.lock:
+            self._watched[node_name] -= 1
+            if self._watched[node_name] <= 0:
+                del self._watched[node_name]
+            self._refresh()
+
+    def count_event_callbacks(self, change: int) -> None:
+        """A parameter event callback was added (+1) or removed (-1)."""
+        with self.reader.lock:
+            self._event_callbacks += change
+            if change > 0 and self._event_callbacks == 1 and self.reader.filter is not None \
+                    and self._user is None:
+                self._logger.info(
+                    'parameter event callback added: the parameter event handler now receives '
+                    'the events of every node, until the last such callback is removed')
+            self._refresh()
+
+    def set_user(self, filter_expression: str, expression_parameters: Sequence[Literal]) -> None:
+        """See :meth:`ParameterEventHandler.set_parameter_event_filter`."""
+        with self.reader.lock:
+            if self.reader.filter is None:
+                raise ContentFilterError(
+                    f'cannot set parameter event filter {filter_expression!r}: the handler has no '
+                    f'content filter: {self.reader.reason}')
+            if not filter_expression:
+                self._user = None
+                self._refresh()
+                return
+            try:
+                options = ContentFilterOptions(filter_expression,
+                                               dds_literals(expression_parameters))
+            except (TypeError, ValueError) as e:
+                raise ContentFilterError(
+                    f'parameter event filter {filter_expression!r}: bad expression parameter: '
+                    f'{e}') from e
+            previous = self.reader.filter
+            try:
+                changed = self.reader.change(options)
+            except ContentFilterError as e:
+                # An in-place change that rmw_fastrtps rejects leaves the reader as it was.
+                raise ContentFilterError(
+                    f'parameter event filter {filter_expression!r} was rejected, the filter '
+                    f'stays {previous.filter_expression!r}: {e}', function=e.function,
+                    ret=e.ret, rcl_error=e.rcl_error) from e
+            if changed:
+                self._log_change(options)
+            self._user = options
+            self._publish_state()
+
+    def configure_nodes(self, node_names: Optional[Sequence[str]]) -> bool:
+        """See :meth:`ParameterEventHandler.configure_nodes_filter`."""
+        try:
+            if node_names:
+                self.set_user(*node_filter(node_names))
+            else:
+                self.set_user('', ())
+        except (ContentFilterError, ValueError) as e:
+            self._logger.warning(f'configure_nodes_filter({node_names!r}) failed: {e}')
+            return False
+        return True
+
+    def wait(self, timeout_sec: Optional[float]) -> bool:
+        """See :meth:`ParameterEventHandler.wait_for_filter`."""
+        with self.reader.lock:
+            if self.reader.ended:
+                return False
+            target = self.reader.updates
+            if self._gate.is_confirmed(target):
+                return True
+        if not self._gate.wait(target, timeout_sec):
+            return False
+        with self.reader.lock:
+            if self.reader.ended or self.reader.updates != target:
+                return False
+            self._publish_state()
+        return True
+
+    def detach(self) -> None:
+        """The handler is destroyed: no filter changes from now on."""
+        with self.reader.lock:
+            self.reader.detach('the handler was destroyed')
+            self._publish_state()
+
+    # --- the middleware's filter, and the state -------------------------------------------------
+
+    def _wanted(self) -> tuple[str, str, ContentFilterOptions]:
+        """Return ``(mode, reason, filter)`` for the callbacks registered now."""
+        if self._user is not None:
+            return 'user', '', self._user
+        if self._event_callbacks:
+            return 'all', _EVENT_CALLBACK_REASON, ContentFilterOptions(ALL_NODES, [])
+        return 'nodes', '', node_filter([n for n in self._watched if is_quotable(n)])
+
+    def _refresh(self) -> None:
+        """Bring the middleware's filter in line with the callbacks, if it differs from them."""
+        if self.reader.filter is not None:
+            wanted = self._wanted()[2]
+            # In place, from one non-empty expression to another: safe under a spinning executor.
+            if self.reader.update(wanted):
+                self._log_change(wanted)
+        self._publish_state()
+
+    def _log_change(self, options: ContentFilterOptions) -> None:
+        self._logger.debug(f'parameter event filter: {options.filter_expression!r} '
+                           f'{options.expression_parameters} (update {self.reader.updates})')
+
+    def _publish_state(self) -> None:
+        common = self.reader.state
+        if self.reader.filter is None:
+            mode, reason = 'off', common.reason
+        else:
+            mode, reason, _ = self._wanted()
+        if mode in ('all', 'off'):  # the reader's filter lets everything through, or there is none
+            common = common.unfiltered(reason)
+        self._state = ParameterEventFilterState(
+            mode, **common._asdict(), watched_nodes=tuple(sorted(self._watched)),
+            events_received=0, confirmed=self._gate.is_confirmed(common.updates))
