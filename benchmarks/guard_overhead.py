@@ -42,10 +42,7 @@ from typing import Any, Optional
 
 from harness.crash import machine_line, plain_env, server_env
 from harness.proc import Proc, python_module, run_role
-
-
-def say(*words: object) -> None:
-    print(*words, flush=True)
+from harness.report import say
 
 
 # --- roles ---------------------------------------------------------------------------------------

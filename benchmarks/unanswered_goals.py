@@ -47,19 +47,15 @@ import uuid
 from pathlib import Path
 from typing import Any, Optional
 
-from benchmarks.differential import guard_command
 from harness.crash import machine_line, plain_env
 from harness.load import environment_facts
-from harness.proc import Proc, python_module, run_role
+from harness.proc import Proc, guard_command, python_module, run_role
+from harness.report import say
 
 #: Feedback period of the server, s.
 PERIOD_S = 0.02
 #: Feedback messages per goal.
 ORDER = 10
-
-
-def say(*words: object) -> None:
-    print(*words, flush=True)
 
 
 # ==================================================================================================

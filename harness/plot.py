@@ -150,7 +150,7 @@ def _annotate(ax: Any, x: Any, heights: list[float], texts: list[str]) -> None:
     ax.margins(y=0.15)
 
 
-#: The kinds of received bytes of a packet capture (``benchmarks._capture.CATEGORIES``), with
+#: The kinds of received bytes of a packet capture (``harness.capture.CATEGORIES``), with
 #: their colours.
 CATEGORY_COLOURS = {'feedback data': '#1f77b4', 'feedback gap/heartbeat': '#aec7e8',
                     'status': '#ff7f0e', 'discovery': '#2ca02c', 'other': '#c7c7c7'}

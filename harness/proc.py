@@ -18,6 +18,7 @@ import inspect
 import json
 import os
 import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -38,6 +39,15 @@ def python_module(module: str, *args: object) -> list[str]:
     ``tests.helpers.publisher``); a :class:`Proc` finds it through ``PYTHONPATH``.
     """
     return [sys.executable, '-u', '-m', module, *map(str, args)]
+
+
+def guard_command() -> list[str]:
+    """``cft-action guard --``, from this interpreter's environment."""
+    beside = Path(sys.executable).with_name('cft-action')
+    found = str(beside) if beside.exists() else shutil.which('cft-action')
+    if found:
+        return [found, 'guard', '--']
+    return [sys.executable, '-m', 'cft_action.cli', 'guard', '--']
 
 
 def root_on_path(env: Mapping[str, str]) -> dict[str, str]:
