@@ -68,7 +68,7 @@ from typing import Any, Optional
 
 from harness.crash import core_backtrace, machine_line, plain_env, signal_name
 from harness.load import environment_facts
-from harness.proc import Proc, guard_command, python_module, run_role
+from harness.proc import Proc, guard_command, main_or_role, python_module
 from harness.report import fmt, grid, say
 
 CONFIGS = ('rclpy', 'client', 'goals')
@@ -755,10 +755,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     return opts
 
 
-def main(argv: Optional[list[str]] = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if argv and argv[0] == '_role':
-        return run_role(argv[1:], ROLES)
+def main(argv: list[str]) -> int:
+    """Run the benchmark with the command line ``argv``."""
     opts = parse_args(argv)
     header = {'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M'),
               'machine': machine_line(), 'environment': environment_facts(),
@@ -786,4 +784,4 @@ def main(argv: Optional[list[str]] = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(main_or_role(main, ROLES))

@@ -57,7 +57,7 @@ from typing import Any, Optional
 
 from harness.crash import (alive, core_backtrace, crash_site, machine_line, plain_env,
                            server_command, server_env, signal_name, stats_of)
-from harness.proc import Proc, python_module, run_role
+from harness.proc import Proc, main_or_role, python_module
 from harness.report import say
 from harness.server import queue_kwargs
 
@@ -465,10 +465,8 @@ def table(results: list[dict[str, Any]]) -> str:
     return '\n'.join(rows)
 
 
-def main(argv: Optional[list[str]] = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if argv and argv[0] == '_role':
-        return run_role(argv[1:], ROLES)
+def main(argv: list[str]) -> int:
+    """Run the benchmark with the command line ``argv``."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--minutes', type=float, default=10.0, help='per configuration')
     parser.add_argument('--modes', nargs='+', choices=[*MODES, 'rclpy'], default=list(MODES),
@@ -515,4 +513,4 @@ def main(argv: Optional[list[str]] = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(main_or_role(main, ROLES))

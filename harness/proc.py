@@ -211,6 +211,19 @@ class Proc:
         return f'--- {self.name} (rc={self.popen.returncode}) ---\n' + '\n'.join(self.lines[-n:])
 
 
+def main_or_role(main: Callable[[list[str]], int], roles: dict[str, Callable[..., int]],
+                 argv: Optional[Sequence[str]] = None) -> int:
+    """The entry point of a script whose roles run as its own child processes.
+
+    ``_role NAME ARGS...`` runs the role NAME of ``roles`` (:func:`run_role`); anything else is the
+    script's command line, for ``main``. ``argv`` defaults to ``sys.argv[1:]``.
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == '_role':
+        return run_role(argv[1:], roles)
+    return main(argv)
+
+
 def run_role(argv: Sequence[str], roles: dict[str, Callable[..., int]]) -> int:
     """Run the role ``argv[0]`` with the arguments ``argv[1:]``, inside an rclpy context.
 
