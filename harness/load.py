@@ -357,6 +357,7 @@ class LoadRun:
                 report.update({k: a[k] - b[k] for k in a})
         phase = {
             'config': config,
+            'guarded': self.spec.guarded,
             'published': after['published'] - before['published'],
             'accepted': after['accepted'] - before['accepted'],
             'server_cpu_s': after['cpu_s'] - before['cpu_s'],
@@ -584,6 +585,12 @@ def environment_facts() -> dict[str, Any]:
 
 # --- presentation ---------------------------------------------------------------------------------
 
+def phase_label(phase: dict[str, Any]) -> str:
+    """The label of ``phase``'s configuration, and of its server when it ran without the guard."""
+    label = CONFIG_LABELS[phase['config']]
+    return label if phase.get('guarded', True) else f'{label}, unguarded server'
+
+
 def format_table(result: dict[str, Any]) -> str:
     """The per-configuration table: absolute figures, then ratios to plain rclpy."""
     spec = result['spec']
@@ -591,7 +598,7 @@ def format_table(result: dict[str, Any]) -> str:
              'updates', 'upd/goal', 'p50 ms', 'p99 ms', 'rate Hz', 'srv msg/s', 'srv ms/msg')]
     for phase in result['phases']:
         s = phase['summary']
-        rows.append((CONFIG_LABELS[phase['config']], fmt(s['own_per_client']),
+        rows.append((phase_label(phase), fmt(s['own_per_client']),
                      fmt(s['foreign_per_client']), fmt(s['bytes_per_client'] / 1000, '.1f'),
                      fmt(s.get('bytes_to_own_feedback'), '.2f'), fmt(s['client_cpu_s'], '.2f'),
                      str(s['updates']), fmt(s['updates_per_goal'], '.2f'),
@@ -603,7 +610,7 @@ def format_table(result: dict[str, Any]) -> str:
     for phase in result['phases']:
         r = phase['summary'].get('ratio_to_plain')
         if r:
-            ratio_rows.append((CONFIG_LABELS[phase['config']], *(
+            ratio_rows.append((phase_label(phase), *(
                 fmt(r[k], '.3f') for k in ('foreign', 'bytes', 'cpu', 'p50', 'p99',
                                             'server_rate', 'server_cpu'))))
     first = result['phases'][0]['summary']
