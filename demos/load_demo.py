@@ -22,6 +22,7 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -75,6 +76,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     progress(f'load: {spec.clients} client processes x {spec.goals} goals, {spec.order} '
              f'feedback messages per goal at {spec.rate_hz:g} Hz; configurations: '
              + ', '.join(load.CONFIG_LABELS[c] for c in args.configs))
+    machine = load.environment_facts()  # before the run: its load average is the one at the start
     result = load.run_load(spec, args.configs, progress)
     if args.unguarded:
         progress('a second server, without the guard: '
@@ -83,7 +85,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                   progress)
         result['phases'] += unguarded['phases']
         load.add_ratios(result['phases'])  # against the guarded server's plain rclpy phase
-    result['machine'] = load.environment_facts()
+    result['machine'] = machine
+    result['load_average_at_end'] = os.getloadavg()
     result['elapsed_s'] = time.monotonic() - started
     print()
     print(load.format_table(result))
