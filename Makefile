@@ -6,10 +6,18 @@
 # version has its own venv, so that switching needs no `make clean`: .venv for 3.11, the default,
 # and .venv-3.12 for 3.12 (VENV=... chooses another directory).
 PYTHON ?= $(shell command -v python3.11 || command -v python3)
-PYTHON_VERSION := $(shell $(PYTHON) -c 'import sys; print("%d.%d" % sys.version_info[:2])')
-ifeq ($(PYTHON_VERSION),)
-$(error cannot run PYTHON=$(PYTHON))
+# The interpreter itself. A PYTHON that does not run falls back to pyenv's copy of that version,
+# the newest patch release ($(pyenv root)/versions/3.12.*/bin/python3.12 for python3.12; $PYENV_ROOT
+# or ~/.pyenv when pyenv is not on PATH): where only pyenv has 3.12, `command -v python3.12` finds
+# pyenv's shim, and the shim refuses to run a version that `pyenv global` did not select.
+PYTHON_NAME := $(notdir $(PYTHON))
+PYTHON_EXE := $(shell $(PYTHON) -c 'import sys; print(sys.executable)' 2>/dev/null || \
+	ls -d "$$(pyenv root 2>/dev/null || echo $${PYENV_ROOT:-$$HOME/.pyenv})"/versions/$(patsubst python%,%,$(PYTHON_NAME)).*/bin/$(PYTHON_NAME) \
+	2>/dev/null | sort -V | tail -n 1)
+ifeq ($(PYTHON_EXE),)
+$(error cannot run PYTHON=$(PYTHON), and pyenv has no $(PYTHON_NAME) either: install that Python or pass PYTHON=/path/to/python)
 endif
+PYTHON_VERSION := $(shell $(PYTHON_EXE) -c 'import sys; print("%d.%d" % sys.version_info[:2])')
 VENV ?= $(if $(filter 3.11,$(PYTHON_VERSION)),.venv,.venv-$(PYTHON_VERSION))
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
@@ -18,12 +26,14 @@ STAMP := $(VENV)/.installed
 
 # [jazzy] is ROS 2 Jazzy from PyPI, so that a machine without ROS needs nothing else.
 $(STAMP): pyproject.toml setup.py $(wildcard cft_action/*.c cft_action/*.h)
-	$(PYTHON) -m venv $(VENV)
+	$(PYTHON_EXE) -m venv $(VENV)
 	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[jazzy,test,bench,lint]'
 	touch $(STAMP)
 
+# TESTS narrows the run to some test files, e.g. `make test TESTS=tests/test_readme.py`.
+TESTS ?=
 test: $(STAMP)
-	$(PY) -m pytest
+	$(PY) -m pytest $(TESTS)
 
 # ruff and mypy take their settings from pyproject.toml.
 lint: $(STAMP)

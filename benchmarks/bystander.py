@@ -17,7 +17,7 @@ neighbours, each process in its own network namespace (:mod:`harness.netns`):
 Every process, the bystander included, sends M goals at once. The bystander's figure is the
 ``rx_bytes`` of its own interface over the phase's window divided by the feedback samples it took
 (own and foreign: every goal's). A packet capture on the bystander's interface
-(``benchmarks._capture``, off with ``--no-capture``) splits those bytes into feedback data,
+(``harness.capture``, off with ``--no-capture``) splits those bytes into feedback data,
 GAPs/heartbeats, status, discovery and other, so that the feedback data per sample, which is where
 the filter signatures go, is visible apart from status (whose share grows with the number of
 goals, equally in both columns).
@@ -45,9 +45,10 @@ import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
-from benchmarks._capture import CATEGORIES
 from harness import load
+from harness.capture import CATEGORIES
 from harness.cli import int_list, name_list
+from harness.report import fmt
 
 REPO = Path(__file__).resolve().parent.parent
 #: The neighbours' configurations, in the order they run at each K.
@@ -98,37 +99,6 @@ def plan(neighbours: Sequence[int]) -> list[tuple[str, int]]:
     return phases + [('rclpy', 0)]
 
 
-def bystander_figures(phase: dict[str, Any]) -> dict[str, Any]:
-    """What the bystander of ``phase`` received, per feedback sample it took."""
-    report = phase['bystanders'][0]
-    samples = report['own'] + report['foreign']
-    figures: dict[str, Any] = {
-        'neighbours': phase['n_clients'],
-        'neighbour_config': phase['config'] if phase['n_clients'] else None,
-        'published': phase['published'],
-        'samples': samples,
-        'lost': phase['published'] - samples,
-        'rx_bytes': report.get('rx_bytes'),
-        'rx_packets': report.get('rx_packets'),
-        'rx_bytes_per_sample': report['rx_bytes'] / samples if samples and 'rx_bytes' in report
-        else None,
-        'packets_per_sample': report['rx_packets'] / samples if samples and 'rx_packets' in report
-        else None,
-        'feedback_message_bytes': phase['summary']['feedback_message_bytes'],
-        'latency_p50_ms': phase['bystander_summary']['latency_p50_ms'],
-        'latency_p99_ms': phase['bystander_summary']['latency_p99_ms'],
-        'neighbour_rx_bytes_per_client': phase['summary']['bytes_per_client'],
-        'load_average_at_end': phase.get('load_average_at_end'),
-    }
-    anatomy = phase.get('anatomy')
-    if anatomy and samples:
-        figures['per_sample'] = {c: anatomy[c]['bytes'] / samples for c in CATEGORIES}
-        data = anatomy['feedback data']
-        figures['feedback_data_bytes_per_packet'] = (data['bytes'] / data['packets']
-                                                     if data['packets'] else None)
-    return figures
-
-
 def add_ratios(rows: list[dict[str, Any]]) -> None:
     """Add to each row its ratios to the first K = 0 row and to the plain neighbours' row of the
     same K, for the whole bytes and for the feedback data alone."""
@@ -172,10 +142,10 @@ def run_size(size: str, args: argparse.Namespace, record: dict[str, Any],
             phase = run.run_phase(config, clients=k)
             phase['load_average_at_end'] = os.getloadavg()
             record['phases'].append(phase)
-            record['rows'].append(bystander_figures(phase))
+            record['rows'].append(load.bystander_figures(phase))
             row = record['rows'][-1]
             progress(f'    bystander: {row["samples"]} samples of {row["published"]} published, '
-                     f'{_fmt(row["rx_bytes_per_sample"], ".1f")} B per sample on the wire')
+                     f'{fmt(row["rx_bytes_per_sample"], ".1f")} B per sample on the wire')
             add_ratios(record['rows'])
             save()
     finally:
@@ -183,10 +153,6 @@ def run_size(size: str, args: argparse.Namespace, record: dict[str, Any],
 
 
 # --- presentation ---------------------------------------------------------------------------------
-
-def _fmt(value: Optional[float], spec: str) -> str:
-    return '-' if value is None else format(value, spec)
-
 
 def _row_at(rows: list[dict[str, Any]], k: int, config: str) -> Optional[dict[str, Any]]:
     return next((r for r in rows if r['neighbours'] == k
@@ -219,13 +185,13 @@ def markdown(results: dict[str, Any]) -> str:
                 continue
             data = [r.get('per_sample', {}).get('feedback data') for r in (plain, cft)]
             out.append(
-                f"| {k} | {_fmt(plain['rx_bytes_per_sample'], '.1f')} | "
-                f"{_fmt(plain['rx_to_alone'], '.3f')} | {_fmt(cft['rx_bytes_per_sample'], '.1f')} "
-                f"| {_fmt(cft['rx_to_alone'], '.3f')} | "
-                f"{_fmt(cft['rx_to_plain_neighbours'], '.3f')} | "
-                f"{_fmt(data[0], '.1f')} / {_fmt(data[1], '.1f')} | "
-                f"{_fmt(cft['feedback_data_to_plain_neighbours'], '.3f')} | "
-                f"{_fmt(cft.get('feedback_data_bytes_per_filtered_reader'), '.1f')} | "
+                f"| {k} | {fmt(plain['rx_bytes_per_sample'], '.1f')} | "
+                f"{fmt(plain['rx_to_alone'], '.3f')} | {fmt(cft['rx_bytes_per_sample'], '.1f')} "
+                f"| {fmt(cft['rx_to_alone'], '.3f')} | "
+                f"{fmt(cft['rx_to_plain_neighbours'], '.3f')} | "
+                f"{fmt(data[0], '.1f')} / {fmt(data[1], '.1f')} | "
+                f"{fmt(cft['feedback_data_to_plain_neighbours'], '.3f')} | "
+                f"{fmt(cft.get('feedback_data_bytes_per_filtered_reader'), '.1f')} | "
                 f"{plain['samples']} ({plain['lost']}) / {cft['samples']} ({cft['lost']}) |")
         filtered = [r for r in rows if r['neighbour_config'] == 'client' and 'per_sample' in r]
         if len(filtered) >= 2:
@@ -237,9 +203,9 @@ def markdown(results: dict[str, Any]) -> str:
         again = [r for r in rows if r['neighbours'] == 0][1:]
         if again:
             out.append(f"\nThe bystander alone again after the filtered neighbours left: "
-                       f"{_fmt(again[-1]['rx_bytes_per_sample'], '.1f')} B/sample "
-                       f"(× K=0: {_fmt(again[-1]['rx_to_alone'], '.3f')}), feedback data "
-                       f"{_fmt(again[-1].get('per_sample', {}).get('feedback data'), '.1f')}.")
+                       f"{fmt(again[-1]['rx_bytes_per_sample'], '.1f')} B/sample "
+                       f"(× K=0: {fmt(again[-1]['rx_to_alone'], '.3f')}), feedback data "
+                       f"{fmt(again[-1].get('per_sample', {}).get('feedback data'), '.1f')}.")
         if any('per_sample' in r for r in rows):
             out.append('\n*The bystander\'s received bytes per feedback sample, by kind '
                        '(captured)*\n')
@@ -253,7 +219,7 @@ def markdown(results: dict[str, Any]) -> str:
                 per = r['per_sample']
                 out.append(f"| {who} | " + ' | '.join(f'{per[c]:.1f}' for c in CATEGORIES)
                            + f" | {sum(per.values()):.1f} | "
-                           f"{_fmt(r['packets_per_sample'], '.2f')} |")
+                           f"{fmt(r['packets_per_sample'], '.2f')} |")
         loads = [r['load_average_at_end'] for r in rows if r.get('load_average_at_end')]
         if loads:
             out.append(f"\nLoad average (1 min) at the end of the phases: "

@@ -66,10 +66,10 @@ import uuid
 from pathlib import Path
 from typing import Any, Optional
 
-from benchmarks.soak import _counting
 from harness.crash import core_backtrace, machine_line, plain_env, signal_name
-from harness.load import _grid, environment_facts
-from harness.proc import Proc, python_module, run_role
+from harness.load import environment_facts
+from harness.proc import Proc, guard_command, main_or_role, python_module
+from harness.report import fmt, grid, say
 
 CONFIGS = ('rclpy', 'client', 'goals')
 #: Seconds a client may take to prove its endpoints (``probe``), per action client.
@@ -80,10 +80,6 @@ RESPONSE_S = 15.0
 UPDATE_WINDOW_S = 2.0
 #: Seconds between progress lines.
 PROGRESS_S = 10.0
-
-
-def say(*words: object) -> None:
-    print(*words, flush=True)
 
 
 # ==================================================================================================
@@ -241,7 +237,7 @@ def role_life(action: str, config: str, spec: str, linger: float, depth: int,
     from rclpy.node import Node
     from rclpy.qos import QoSProfile, ReliabilityPolicy
 
-    from harness.client import filter_counters, make_client, probe
+    from harness.client import filter_counters, make_client, probe, recording_feedback
 
     life = json.loads(spec)
     t0 = time.monotonic()
@@ -250,8 +246,8 @@ def role_life(action: str, config: str, spec: str, linger: float, depth: int,
     clients = []
     for _ in range(life['clients']):
         client = make_client(node, config, action, qos)
-        client.__class__ = _counting(type(client))  # records every feedback taken from rcl
-        client.soak_taken = []
+        client.__class__ = recording_feedback(type(client))  # records every feedback taken from rcl
+        client.feedback_taken = []
         clients.append(client)
     executor = (MultiThreadedExecutor() if life['executor'] == 'multi'
                 else SingleThreadedExecutor())
@@ -277,7 +273,7 @@ def role_life(action: str, config: str, spec: str, linger: float, depth: int,
             own = [g for g in goals if g['client'] == i and g['uuid']]
             with_cb = {bytes.fromhex(g['uuid']) for g in own if g['cb']}
             without = {bytes.fromhex(g['uuid']) for g in own if not g['cb']}
-            taken = [u for u, _k in client.soak_taken]
+            taken = [u for u, _k in client.feedback_taken]
             report['taken'].append({
                 'all': len(taken), 'own_cb': sum(u in with_cb for u in taken),
                 'own_no_cb': sum(u in without for u in taken),
@@ -300,15 +296,6 @@ ROLES = {'life': role_life}
 # ==================================================================================================
 # The harness
 # ==================================================================================================
-
-def guard_command() -> list[str]:
-    """``cft-action guard --``, from this interpreter's environment."""
-    beside = Path(sys.executable).with_name('cft-action')
-    found = str(beside) if beside.exists() else shutil.which('cft-action')
-    if found:
-        return [found, 'guard', '--']
-    return [sys.executable, '-m', 'cft_action.cli', 'guard', '--']
-
 
 class Differential:
     """One server, the configurations in turn, and everything they reported."""
@@ -688,10 +675,6 @@ def goal_details(lives: dict[str, list[dict[str, Any]]], published: dict[str, in
 # Presentation
 # ==================================================================================================
 
-def _ratio(value: Optional[float]) -> str:
-    return '-' if value is None else f'{value:.3f}'
-
-
 def markdown_table(summaries: dict[str, dict[str, Any]]) -> str:
     rows = ['| config | client lives (failed) | goals | with callback | feedback delivered '
             '| fewer than plain (first after filter update / other at start / gaps) | foreign '
@@ -714,8 +697,8 @@ def markdown_table(summaries: dict[str, dict[str, Any]]) -> str:
     for s in summaries.values():
         r = s.get('ratio_to_plain')
         if r:
-            rows.append(f'| {s["config"]} | {_ratio(r["delivered_comparable"])} | '
-                        f'{_ratio(r["lost"])} | {_ratio(r["taken_other"])} |')
+            rows.append(f'| {s["config"]} | {fmt(r["delivered_comparable"], ".3f")} | '
+                        f'{fmt(r["lost"], ".3f")} | {fmt(r["taken_other"], ".3f")} |')
     return '\n'.join(rows)
 
 
@@ -728,7 +711,7 @@ def text_table(summaries: dict[str, dict[str, Any]]) -> str:
                      *(str(s.get(k, '-')) for k in ('fewer_first_after_update', 'fewer_at_start',
                                                     'fewer_gaps')), str(s['foreign']),
                      str(s['lost']), str(s['published_cb']), str(s['server_crashes'])))
-    return _grid(rows)
+    return grid(rows)
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -772,10 +755,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     return opts
 
 
-def main(argv: Optional[list[str]] = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if argv and argv[0] == '_role':
-        return run_role(argv[1:], ROLES)
+def main(argv: list[str]) -> int:
+    """Run the benchmark with the command line ``argv``."""
     opts = parse_args(argv)
     header = {'date_utc': datetime.datetime.now(datetime.timezone.utc).strftime('%Y-%m-%d %H:%M'),
               'machine': machine_line(), 'environment': environment_facts(),
@@ -803,4 +784,4 @@ def main(argv: Optional[list[str]] = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(main_or_role(main, ROLES))

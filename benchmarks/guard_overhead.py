@@ -41,11 +41,8 @@ from pathlib import Path
 from typing import Any, Optional
 
 from harness.crash import machine_line, plain_env, server_env
-from harness.proc import Proc, python_module, run_role
-
-
-def say(*words: object) -> None:
-    print(*words, flush=True)
+from harness.proc import Proc, main_or_role, python_module
+from harness.report import say
 
 
 # --- roles ---------------------------------------------------------------------------------------
@@ -330,10 +327,8 @@ def spread(values: list[float], fmt: str) -> str:
             f'({format(min(values), fmt)}–{format(max(values), fmt)})')
 
 
-def main(argv: Optional[list[str]] = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if argv and argv[0] == '_role':
-        return run_role(argv[1:], ROLES)
+def main(argv: list[str]) -> int:
+    """Run the benchmark with the command line ``argv``."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--messages', type=int, default=20000, help='publishes per throughput run')
     parser.add_argument('--roundtrips', type=int, default=2000, help='round trips per latency run')
@@ -400,4 +395,4 @@ def main(argv: Optional[list[str]] = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(main_or_role(main, ROLES))

@@ -52,11 +52,11 @@ import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
-from benchmarks.differential import guard_command
 from harness import load
 from harness.crash import live_backtrace, machine_line, plain_env
 from harness.procstat import Sampler, profile
-from harness.proc import Proc, ROOT, python_module
+from harness.proc import Proc, ROOT, guard_command, python_module
+from harness.report import fmt, markdown_table, say
 
 #: Labels of the configurations, in the order of the table's columns.
 LABELS = {'client': 'cft_action (client mode)', 'rclpy': 'plain rclpy'}
@@ -76,11 +76,6 @@ WATCH = {
     'publish_feedback': 'feedback published',
     'rcl_wait': 'waiting (rcl_wait)',
 }
-
-
-def say(*words: object) -> None:
-    """Progress output, flushed at once."""
-    print(*words, flush=True)
 
 
 def status_message_bytes(goals: int) -> int:
@@ -356,7 +351,7 @@ RATIO_KEYS = {'delivered', 'client_cpu_s', 'client_maxrss_mb', 'server_cpu_s',
               'server_maxrss_mb', 'last_response_s', 'done_s', 'last_callback_s'}
 
 
-def _cell(s: dict[str, Any], key: str, fmt: str) -> str:
+def _cell(s: dict[str, Any], key: str, spec: str) -> str:
     if key == 'short':
         return f'{s["goals_short"]} / {s["missing"]}'
     if key == 'events':
@@ -366,15 +361,11 @@ def _cell(s: dict[str, Any], key: str, fmt: str) -> str:
     if key == 'load':
         return f'{s["load_before"]:.2f} / {s["load_after"]:.2f}' if 'load_before' in s else '-'
     if key == 'latency':
-        return f'{_num(s["latency_p50_ms"], ".0f")} / {_num(s["latency_p99_ms"], ".0f")}'
-    return _num(s.get(key), fmt)
+        return f'{fmt(s["latency_p50_ms"], ".0f")} / {fmt(s["latency_p99_ms"], ".0f")}'
+    return fmt(s.get(key), spec)
 
 
-def _num(value: Any, fmt: str) -> str:
-    return '-' if value is None else format(value, fmt)
-
-
-def markdown_table(summaries: Sequence[dict[str, Any]]) -> str:
+def summary_tables(summaries: Sequence[dict[str, Any]]) -> str:
     """One table per goal count: a column per configuration, and cft / plain where both ran."""
     out = []
     for goals in sorted({s['goals'] for s in summaries}):
@@ -384,15 +375,16 @@ def markdown_table(summaries: Sequence[dict[str, Any]]) -> str:
         head = ['', *(LABELS.get(s['config'], s['config']) for s in cols)]
         if ratio:
             head.append('cft / plain')
-        lines = [f'**{goals} goals** (status message {cols[0]["status_message_bytes"]:,} B)', '',
-                 '| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
-        for label, key, fmt in ROWS:
-            row = [label, *(_cell(s, key, fmt) for s in cols)]
+        rows = []
+        for label, key, spec in ROWS:
+            row = [label, *(_cell(s, key, spec) for s in cols)]
             if ratio:
                 a, b = by_config['client'].get(key), by_config['rclpy'].get(key)
                 row.append(f'{a / b:.2f}x' if key in RATIO_KEYS and a is not None and b else '')
-            lines.append('| ' + ' | '.join(row) + ' |')
-        out.append('\n'.join(lines))
+            rows.append(row)
+        out.append('\n'.join([f'**{goals} goals** (status message '
+                              f'{cols[0]["status_message_bytes"]:,} B)', '',
+                              *markdown_table(head, rows)]))
     return '\n\n'.join(out)
 
 
@@ -407,12 +399,9 @@ def profile_table(phases: Sequence[dict[str, Any]]) -> str:
                                     f'({found["accepted"]} accepted)', found[name]))
     if not columns:
         return ''
-    lines = ['| share of samples | ' + ' | '.join(c for c, _ in columns) + ' |',
-             '|' + '---|' * (len(columns) + 1)]
-    for needle, label in WATCH.items():
-        lines.append(f'| {label} | ' + ' | '.join(
-            f'{found["watched"].get(needle, 0):.0%}' for _, found in columns) + ' |')
-    return '\n'.join(lines)
+    rows = [[label, *(f'{found["watched"].get(needle, 0):.0%}' for _, found in columns)]
+            for needle, label in WATCH.items()]
+    return '\n'.join(markdown_table(['share of samples', *(c for c, _ in columns)], rows))
 
 
 def plot(phases: Sequence[dict[str, Any]], path: Path) -> Optional[Path]:
@@ -494,7 +483,7 @@ def write_result(out: Path, now: datetime.datetime, opts: argparse.Namespace,
                              *(argv if argv is not None else sys.argv[1:])]),
         'args': {k: str(v) if isinstance(v, Path) else v for k, v in vars(opts).items()},
         'complete': complete, 'load_average': load_averages, 'summaries': summaries,
-        'table': markdown_table(summaries), 'profile_table': profile_table(phases),
+        'table': summary_tables(summaries), 'profile_table': profile_table(phases),
         'phases': phases,
     }
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -509,7 +498,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             saved = json.loads(path.read_text())
             say(f'{path}: {saved["command"]} ({saved["date"]}, load average '
                 f'{saved["load_average"]["start"][0]:.2f} at start)\n')
-            say(markdown_table(saved['summaries']))
+            say(summary_tables(saved['summaries']))
             if saved.get('profile_table'):
                 say('\n' + saved['profile_table'])
             if opts.plot:
@@ -543,7 +532,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 f'{s["client_maxrss_mb"]:.0f} MB, server {s["server_cpu_s"]:.1f} CPU s '
                 f'{s["server_maxrss_mb"]:.0f} MB; load {os.getloadavg()[0]:.2f}')
     load_averages['end'] = os.getloadavg()
-    table = markdown_table(summaries)
+    table = summary_tables(summaries)
     profiles = profile_table(phases)
     say('\n' + table + ('\n\n' + profiles if profiles else ''))
     write_result(out, now, opts, argv, load_averages, summaries, phases, complete=True)

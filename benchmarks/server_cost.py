@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any, Optional, Sequence
 
 from harness import load
+from harness.report import fmt, grid, markdown_table
 
 REPO = Path(__file__).resolve().parent.parent
 #: int32 elements after the 3-element header: 36 B, 1 kB and 10 kB feedback messages.
@@ -210,11 +211,11 @@ def format_table(points: list[dict[str, Any]]) -> str:
             gf = f['guard_filter']
             rows.append((point['guard'], point['size'], str(point['clients']),
                          load.CONFIG_LABELS[f['config']] + (' (cut)' if f['timed_out'] else ''),
-                         str(f['published']), _fmt(f['goals_s'], '.1f'),
-                         _fmt(f['rate_msgs_per_s'], '.0f'), _fmt(r['rate'], '.2f'),
-                         _fmt(f['cpu_ms_per_msg'], '.3f'), _fmt(r['cpu_per_msg'], '.2f'),
+                         str(f['published']), fmt(f['goals_s'], '.1f'),
+                         fmt(f['rate_msgs_per_s'], '.0f'), fmt(r['rate'], '.2f'),
+                         fmt(f['cpu_ms_per_msg'], '.3f'), fmt(r['cpu_per_msg'], '.2f'),
                          str(gf.get('uuid_verdicts', '-')), str(gf.get('fastdds_verdicts', '-'))))
-    return load._grid(rows)
+    return grid(rows)
 
 
 def markdown(points: list[dict[str, Any]]) -> str:
@@ -229,29 +230,25 @@ def markdown(points: list[dict[str, Any]]) -> str:
         head += [f'{load.CONFIG_LABELS[c]}: rate, CPU/msg' for c in configs]
         out += [f'Guard {guard_mode}: ratios to plain rclpy (rate: higher is better; CPU per '
                 'message: lower is better; "cut": the goals had not finished after the phase '
-                'timeout, the rate is what was published until then)', '',
-                '| ' + ' | '.join(head) + ' |', '|' + '---|' * len(head)]
+                'timeout, the rate is what was published until then)', '']
+        rows = []
         for p in mine:
             by = {f['config']: f for f in p['figures']}
             plain = by.get('rclpy', {})
             row = [f"{p['size']} ({p['feedback_bytes']} B)", str(p['clients']),
-                   f"{_fmt(plain.get('rate_msgs_per_s'), '.0f')}, "
-                   f"{_fmt(plain.get('cpu_ms_per_msg'), '.3f')}"]
+                   f"{fmt(plain.get('rate_msgs_per_s'), '.0f')}, "
+                   f"{fmt(plain.get('cpu_ms_per_msg'), '.3f')}"]
             for c in configs:
                 f = by.get(c)
                 if f is None or 'error' in f:
                     row.append('failed' if f else '-')
                     continue
                 r = f['ratio_to_plain']
-                row.append(f"{_fmt(r['rate'], '.2f')}, {_fmt(r['cpu_per_msg'], '.2f')}"
+                row.append(f"{fmt(r['rate'], '.2f')}, {fmt(r['cpu_per_msg'], '.2f')}"
                            + (' (cut)' if f['timed_out'] else ''))
-            out.append('| ' + ' | '.join(row) + ' |')
-        out.append('')
+            rows.append(row)
+        out += [*markdown_table(head, rows), '']
     return '\n'.join(out)
-
-
-def _fmt(value: Optional[float], spec: str) -> str:
-    return '-' if value is None else format(value, spec)
 
 
 def plot(points: list[dict[str, Any]], path: Path) -> None:

@@ -57,7 +57,8 @@ from typing import Any, Optional
 
 from harness.crash import (alive, core_backtrace, crash_site, machine_line, plain_env,
                            server_command, server_env, signal_name, stats_of)
-from harness.proc import Proc, python_module, run_role
+from harness.proc import Proc, main_or_role, python_module
+from harness.report import say
 from harness.server import queue_kwargs
 
 MODES = ('client', 'goals', 'upstream')
@@ -66,29 +67,9 @@ DEPTH = 1000
 STRAGGLER_S = 15.0
 
 
-def say(*words: object) -> None:
-    print(*words, flush=True)
-
-
 # ==================================================================================================
 # The client process
 # ==================================================================================================
-
-def _counting(base: type) -> type:
-    """A subclass of ``base`` that records the goal UUID and counter of every feedback taken."""
-
-    class Counting(base):  # type: ignore[misc, valid-type]
-        def take_data(self) -> dict:
-            data = super().take_data()
-            feedback = data.get('feedback')
-            if feedback is not None:
-                self.soak_taken.append((bytes(feedback.goal_id.uuid),
-                                        int(feedback.feedback.sequence[0])
-                                        if len(feedback.feedback.sequence) else -1))
-            return data
-
-    return Counting
-
 
 def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: int,
                 order_max: int, cancel_p: float, period: float) -> int:
@@ -97,19 +78,22 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
     from test_msgs.action import Fibonacci
     from unique_identifier_msgs.msg import UUID
 
+    from harness.client import recording_feedback
+
     rng = random.Random(seed)
     node = Node(f'soak_{uuid.uuid4().hex[:8]}')
     qos = queue_kwargs(str(DEPTH), 'sub')
     if mode == 'upstream':
         from harness.upstream import UpstreamEquivalentActionClient
-        client = _counting(UpstreamEquivalentActionClient)(node, Fibonacci, action, **qos)
+        client = recording_feedback(UpstreamEquivalentActionClient)(node, Fibonacci, action, **qos)
     elif mode == 'rclpy':
         from rclpy.action import ActionClient as RclpyActionClient
-        client = _counting(RclpyActionClient)(node, Fibonacci, action, **qos)
+        client = recording_feedback(RclpyActionClient)(node, Fibonacci, action, **qos)
     else:
         from cft_action import ActionClient
-        client = _counting(ActionClient)(node, Fibonacci, action, feedback_filter=mode, **qos)
-    client.soak_taken = []
+        client = recording_feedback(ActionClient)(node, Fibonacci, action, feedback_filter=mode,
+                                                  **qos)
+    client.feedback_taken = []
     executor = SingleThreadedExecutor()
     executor.add_node(node)
 
@@ -199,7 +183,7 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
 
     def all_taken() -> bool:
         taken: dict[bytes, set[int]] = {}
-        for goal_uuid, k in client.soak_taken:
+        for goal_uuid, k in client.feedback_taken:
             taken.setdefault(goal_uuid, set()).add(k)
         return all(len(taken.get(u, ())) >= n for u, n in expected.items())
 
@@ -218,7 +202,7 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
     own.update(goal[0] for goal in goals)
     received: dict[bytes, set[int]] = {}
     foreign = duplicates = 0
-    for goal_uuid, k in client.soak_taken:
+    for goal_uuid, k in client.feedback_taken:
         if goal_uuid not in own:
             foreign += 1
         elif k in received.setdefault(goal_uuid, set()):
@@ -253,7 +237,7 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
         'finished': finished, 'goals': len(goals), 'no_result': no_result,
         'rejected': rejected, 'canceled': canceled, 'published': published, 'lost': lost,
         'lost_at_start': lost_at_start,
-        'foreign': foreign, 'duplicates': duplicates, 'taken': len(client.soak_taken),
+        'foreign': foreign, 'duplicates': duplicates, 'taken': len(client.feedback_taken),
         'filter_sets': filter_sets, 'filter_note': filter_note,
         'life_s': round(time.monotonic() - t0, 2)})
     say('RESULT', json.dumps(report))
@@ -481,10 +465,8 @@ def table(results: list[dict[str, Any]]) -> str:
     return '\n'.join(rows)
 
 
-def main(argv: Optional[list[str]] = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if argv and argv[0] == '_role':
-        return run_role(argv[1:], ROLES)
+def main(argv: list[str]) -> int:
+    """Run the benchmark with the command line ``argv``."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--minutes', type=float, default=10.0, help='per configuration')
     parser.add_argument('--modes', nargs='+', choices=[*MODES, 'rclpy'], default=list(MODES),
@@ -531,4 +513,4 @@ def main(argv: Optional[list[str]] = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(main_or_role(main, ROLES))

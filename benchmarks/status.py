@@ -9,7 +9,7 @@ lists all goals. So a client's status bytes grow with the square of the goals.
 
 Two parts, both through the load harness of ``make demo`` (:mod:`harness.load`), with a packet
 capture on the first client of every phase (:class:`harness.load.CapturingRun`,
-``benchmarks/_capture.py``) and every client counting the status messages it takes and their
+``harness/capture.py``) and every client counting the status messages it takes and their
 serialized size (:mod:`harness.client`):
 
 - ``grid``: N client processes x M goals each, all sent at once, for each configuration (plain
@@ -20,8 +20,9 @@ serialized size (:mod:`harness.client`):
 
 Before ``go`` a phase waits until the clients' probe goals (:mod:`harness.client`) have expired
 (when ``result_timeout`` is at most :data:`PROBE_WAIT_MAX_S`), so the window starts with an empty
-status list. Next to each measurement stands the model of :func:`predict`: three status messages
-per goal, each of :func:`wire_bytes` for the goals held at that moment.
+status list. Next to each measurement stands the model of
+:func:`harness.status_model.predict`: three status messages per goal, each of
+:func:`harness.status_model.wire_bytes` for the goals held at that moment.
 
 Results (machine, date, command, versions, load averages, every raw figure) go to
 ``benchmarks/results/status-<date>-<host>.json`` after every point; the tables are printed as
@@ -36,7 +37,6 @@ root (network namespaces)::
 from __future__ import annotations
 
 import argparse
-import bisect
 import datetime
 import json
 import math
@@ -50,88 +50,16 @@ from typing import Any, Callable, Optional, Sequence
 
 from harness import load
 from harness.cli import int_list, name_list
-from harness.client import STATUS_ARRAY_HEADER, STATUS_ENTRY, status_array_size
 from harness.proc import Proc
+from harness.report import fmt, markdown_table
+from harness.status_model import (INFO_DST, MESSAGES_PER_GOAL, STATUS_ENTRY, WIRE_OVERHEAD,
+                                   entries_in, predict)
 
 REPO = Path(__file__).resolve().parent.parent
-
-#: Status messages rclpy's ActionServer publishes per goal that succeeds: accepted, executing,
-#: succeeded (``ServerGoalHandle._update_state`` and ``_execute_goal_request``). Expiring goals
-#: publishes nothing.
-MESSAGES_PER_GOAL = 3
-
-#: Bytes of a status sample on the wire besides its CDR payload, as captured on a client's veth
-#: (decoded from the frames): Ethernet 14, IPv4 20, UDP 8, RTPS header 20, INFO_TS 12, the DATA
-#: submessage's header 24, a piggybacked HEARTBEAT 32 (the writer's keep-last-1 history is always
-#: full), and 60 of the vendor submessage 0x80 that Fast DDS built with statistics appends to every
-#: datagram it sends. The payload is padded to 4 bytes.
-WIRE_OVERHEAD = 14 + 20 + 8 + 20 + 12 + 24 + 32 + 60
-#: The INFO_DST submessage, which the writer adds when it has a single reader (with several it
-#: sends each the same datagram, addressed to none).
-INFO_DST = 16
-#: Bytes of IPv4 payload per fragment at the veth's MTU of 1500, and the headers each further
-#: fragment repeats (Ethernet and IPv4).
-IP_FRAGMENT_PAYLOAD = 1480
-IP_FRAGMENT_HEADERS = 14 + 20
 
 #: Longest wait for the probe goals to expire before a phase's ``go``: with a longer
 #: result_timeout they stay, and the model counts them as held.
 PROBE_WAIT_MAX_S = 10
-
-
-def wire_bytes(entries: int, readers: int = 2) -> int:
-    """Bytes on the wire of one status sample that lists ``entries`` goals, at one of ``readers``.
-
-    The CDR payload (:func:`harness.client.status_array_size`, padded to 4) with
-    :data:`WIRE_OVERHEAD` (and :data:`INFO_DST` for a single reader), and the headers of each IPv4
-    fragment after the first.
-    """
-    frame = (WIRE_OVERHEAD + (INFO_DST if readers == 1 else 0)
-             + 4 * math.ceil(status_array_size(entries) / 4))
-    fragments = max(1, math.ceil((frame - 14 - 20) / IP_FRAGMENT_PAYLOAD))
-    return frame + IP_FRAGMENT_HEADERS * (fragments - 1)
-
-
-def entries_in(datagram: float, readers: int = 2) -> float:
-    """Goal entries of a status sample whose UDP datagram is ``datagram`` bytes (inverse of
-    :func:`wire_bytes`, with a piggybacked heartbeat)."""
-    udp_overhead = (WIRE_OVERHEAD - 14 - 20 + (INFO_DST if readers == 1 else 0)
-                    + STATUS_ARRAY_HEADER)
-    return (datagram - udp_overhead) / STATUS_ENTRY
-
-
-def predict(accepted_at: Sequence[float], duration_s: float, result_timeout_s: float,
-            held_before: int = 0, held_before_s: Optional[float] = None,
-            readers: int = 2) -> dict[str, float]:
-    """The status messages of a run, and their entries and bytes, by the model.
-
-    Goal ``i`` is accepted at ``accepted_at[i]`` (s, in the order given for equal times), runs
-    ``duration_s`` and is then held ``result_timeout_s`` more. Each goal makes
-    :data:`MESSAGES_PER_GOAL` messages: two at acceptance (accepted, executing), one when it
-    finishes; each lists the goals held at that moment, plus ``held_before`` goals (such as
-    probes) that stay until ``held_before_s`` (default: ``result_timeout_s``).
-
-    :returns: ``messages``, ``entries`` (summed over messages), ``max_entries``, ``cdr_bytes``
-        and ``wire_bytes`` (per client, every message delivered to each of ``readers``).
-    """
-    accepted = sorted(accepted_at)
-    held_until = result_timeout_s if held_before_s is None else held_before_s
-    expiries = sorted(a + duration_s + result_timeout_s for a in accepted)
-    entries: list[int] = []
-
-    def held(t: float, accepted_so_far: int) -> int:
-        expired = bisect.bisect_right(expiries, t)
-        return accepted_so_far - expired + (held_before if t < held_until else 0)
-
-    for i, a in enumerate(accepted):
-        entries += [held(a, i + 1)] * 2
-    for a in accepted:
-        finish = a + duration_s
-        entries.append(held(finish, bisect.bisect_right(accepted, finish)))
-    return {'messages': len(entries), 'entries': sum(entries),
-            'max_entries': max(entries, default=0),
-            'cdr_bytes': sum(status_array_size(e) for e in entries),
-            'wire_bytes': sum(wire_bytes(e, readers) for e in entries)}
 
 
 class StatusRun(load.CapturingRun):
@@ -343,10 +271,6 @@ def run(args: argparse.Namespace) -> Path:
 
 # --- tables and plot ------------------------------------------------------------------------------
 
-def _fmt(value: Optional[float], spec: str) -> str:
-    return '-' if value is None else format(value, spec)
-
-
 #: A table column: its header, and its cell from a point and one of its phases.
 Column = tuple[str, Callable[[dict[str, Any], dict[str, Any]], str]]
 
@@ -356,7 +280,7 @@ def _figure(key: str, spec: str, scale: float = 1.0) -> Callable[[dict[str, Any]
     """A cell of the phase's status figures (``key``), scaled and formatted."""
     def cell(point: dict[str, Any], phase: dict[str, Any]) -> str:
         value = phase['status'][key]
-        return _fmt(value * scale if value is not None and scale != 1.0 else value, spec)
+        return fmt(value * scale if value is not None and scale != 1.0 else value, spec)
     return cell
 
 
@@ -407,16 +331,15 @@ TIMEOUT_COLUMNS: list[Column] = [
 
 def _table(columns: list[Column], rows: list[dict[str, Any]]) -> list[str]:
     """A Markdown table with a row per phase of ``rows`` (points); a failed point says so."""
-    out = ['| ' + ' | '.join(header for header, _ in columns) + ' |',
-           '|' + '|'.join('---' if header == 'configuration' else '---:'
-                          for header, _ in columns) + '|']
+    cells = []
     for point in rows:
         if point.get('error'):
-            out.append(f"| {point['spec']['clients']} x {point['spec']['goals']}: failed: "
-                       f"{point['error'][:80]} |" + ' |' * (len(columns) - 1))
-        out += ['| ' + ' | '.join(cell(point, phase) for _, cell in columns) + ' |'
-                for phase in point['phases']]
-    return out + ['']
+            cells.append([f"{point['spec']['clients']} x {point['spec']['goals']}: failed: "
+                          f"{point['error'][:80]}", *[''] * (len(columns) - 1)])
+        cells += [[cell(point, phase) for _, cell in columns] for phase in point['phases']]
+    return markdown_table([header for header, _ in columns], cells,
+                          ['---' if header == 'configuration' else '---:'
+                           for header, _ in columns]) + ['']
 
 
 def markdown(all_points: list[dict[str, Any]]) -> str:

@@ -43,6 +43,7 @@ from typing import Any, Optional, Sequence
 
 from harness import load
 from harness.cli import float_list, int_list, name_list
+from harness.report import fmt
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -275,11 +276,11 @@ def markdown_tables(results: dict[str, Any]) -> str:
                 f"{s['foreign_per_client']:.0f} | {s['bytes_per_client'] / 1e3:.0f} "
                 f"({s['bytes_per_client_min'] / 1e3:.0f}–"
                 f"{s['bytes_per_client_max'] / 1e3:.0f}) | "
-                f"{_fmt(s.get('bytes_to_own_feedback'), '.1f')} | {s['client_cpu_s']:.2f} | "
-                f"{s['updates_per_goal']:.2f} | {_fmt(s['latency_p50_ms'], '.1f')} | "
-                f"{_fmt(s['latency_p99_ms'], '.1f')} | {_fmt(s['achieved_rate_hz'], '.0f')} | "
-                f"{_fmt(r.get('bytes'), '.3f')} | "
-                f"{_fmt(r.get('cpu'), '.2f')} |")
+                f"{fmt(s.get('bytes_to_own_feedback'), '.1f')} | {s['client_cpu_s']:.2f} | "
+                f"{s['updates_per_goal']:.2f} | {fmt(s['latency_p50_ms'], '.1f')} | "
+                f"{fmt(s['latency_p99_ms'], '.1f')} | {fmt(s['achieved_rate_hz'], '.0f')} | "
+                f"{fmt(r.get('bytes'), '.3f')} | "
+                f"{fmt(r.get('cpu'), '.2f')} |")
         out.append('')
         for phase in point['phases']:
             if 'anatomy' in phase:
@@ -289,7 +290,7 @@ def markdown_tables(results: dict[str, Any]) -> str:
 
 def anatomy_table(phase: dict[str, Any]) -> str:
     """The byte breakdown of one captured client, as a Markdown table."""
-    from benchmarks._capture import CATEGORIES
+    from harness.capture import CATEGORIES
     own_payload = phase['clients'][0]['own'] * phase['summary']['feedback_message_bytes']
     rows = [f"*{load.CONFIG_LABELS[phase['config']]}, first client: own feedback payload "
             f"{own_payload / 1e3:.1f} kB*\n",
@@ -314,7 +315,7 @@ def anatomy_table(phase: dict[str, Any]) -> str:
 def anatomy_plot(results: dict[str, Any], directory: Path) -> list[Path]:
     """Draw each captured point's received bytes by kind, x own feedback payload, per
     configuration (the first client of each phase); return the PNG paths."""
-    from benchmarks._capture import CATEGORIES
+    from harness.capture import CATEGORIES
     from harness.plot import pyplot, stacked_categories
     plt = pyplot()
     directory.mkdir(parents=True, exist_ok=True)
@@ -344,10 +345,6 @@ def anatomy_plot(results: dict[str, Any], directory: Path) -> list[Path]:
         fig.savefig(paths[-1], dpi=100)
         plt.close(fig)
     return paths
-
-
-def _fmt(value: Optional[float], spec: str) -> str:
-    return '-' if value is None else format(value, spec)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

@@ -47,19 +47,15 @@ import uuid
 from pathlib import Path
 from typing import Any, Optional
 
-from benchmarks.differential import guard_command
 from harness.crash import machine_line, plain_env
 from harness.load import environment_facts
-from harness.proc import Proc, python_module, run_role
+from harness.proc import Proc, guard_command, main_or_role, python_module
+from harness.report import say
 
 #: Feedback period of the server, s.
 PERIOD_S = 0.02
 #: Feedback messages per goal.
 ORDER = 10
-
-
-def say(*words: object) -> None:
-    print(*words, flush=True)
 
 
 # ==================================================================================================
@@ -380,10 +376,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     return parser.parse_args(argv)
 
 
-def main(argv: Optional[list[str]] = None) -> int:
-    argv = sys.argv[1:] if argv is None else argv
-    if argv and argv[0] == '_role':
-        return run_role(argv[1:], ROLES)
+def main(argv: list[str]) -> int:
+    """Run the benchmark with the command line ``argv``."""
     opts = parse_args(argv)
     if opts.summarize:
         runs = [run for path in opts.summarize
@@ -419,4 +413,4 @@ def main(argv: Optional[list[str]] = None) -> int:
 
 
 if __name__ == '__main__':
-    sys.exit(main())
+    sys.exit(main_or_role(main, ROLES))

@@ -92,9 +92,9 @@ class PromptLogger:
     """A node's logger whose calls return at once, for code that runs between goal sends.
 
     rclpy's :class:`RcutilsLogger` finds its caller with ``inspect.getframeinfo``, which on the
-    first call in a process resolves the path of every loaded module (measured: 50 to 165 ms on
-    the 2-core test machine). A client that logs inside ``send_goal_async`` stalls its executor for
-    that long, and a feedback queue of rclpy's default depth, 10 for all goals, then drops the
+    first call in a process resolves the path of every loaded module (for how long: the README,
+    "Differences from rclpy"). A client that logs inside ``send_goal_async`` stalls its executor
+    for that long, and a feedback queue of rclpy's default depth, 10 for all goals, then drops the
     first feedback of the goals sent just before (docs/INTERNALS.md, "Logging never stalls").
     This logger hands rcutils the caller of its method straight from the frame, which is what
     rclpy reports too, and has no filters (``once``, ``throttle``).

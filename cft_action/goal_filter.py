@@ -14,10 +14,11 @@ as it can:
   :meth:`GoalFilterPlan.shrink` once the client has been idle for a while.
 
 A filter expression travels to the server inside one RTPS discovery parameter, whose length is a
-16-bit field: measured, a 57 kB expression reached the server's writer and an 83 kB one silently
-did not. So UUIDs this client generated, which are random, are matched on their first
-:data:`TERM_BYTES` bytes (about 100 characters a goal), caller-supplied ones on all 16, and an
-expression over :data:`MAX_EXPRESSION_BYTES` is refused with :class:`ExpressionTooLong`.
+16-bit field: an expression too long for it never reaches the server's writer, silently
+(docs/INTERNALS.md, section 6, measured). So UUIDs this client generated, which are random, are
+matched on their first :data:`TERM_BYTES` bytes (about 100 characters a goal), caller-supplied
+ones on all 16, and an expression over :data:`MAX_EXPRESSION_BYTES` is refused with
+:class:`ExpressionTooLong`.
 """
 
 from __future__ import annotations

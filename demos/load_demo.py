@@ -1,12 +1,14 @@
 """The multi-client load demo (``make demo``): what content-filtered feedback saves, measured.
 
-One Fibonacci action server process, under the server guard, and N client processes that each send
-M goals with feedback at once; three configurations run one after another under the same load:
-plain ``rclpy.action.ActionClient``, ``cft_action.ActionClient`` in ``client`` mode, and in
-``goals`` mode. For each it prints, per client process, the feedback messages taken from rcl (own
-and foreign), the bytes received, the client CPU seconds, the filter updates and the latency from
-the server's publish to the user callback, with ratios to plain; then it writes a PNG plot and a
-JSON file with every raw figure, and prints their paths.
+One Fibonacci action server process, under the server guard, and N client processes that each send M
+goals with feedback at once; three configurations run one after another under the same load: plain
+``rclpy.action.ActionClient``, ``cft_action.ActionClient`` in ``client`` mode, and in ``goals``
+mode. Then a second server, **without** the guard (the server of someone who only changed a client's
+import), serves ``client`` mode under the same load: it filters nothing, and the clients' own DDS
+readers drop other goals' feedback. For each it prints, per client process, the feedback messages
+taken from rcl (own and foreign), the bytes received, the client CPU seconds, the filter updates and
+the latency from the server's publish to the user callback, with ratios to plain; then it writes a
+PNG plot and a JSON file with every raw figure, and prints their paths.
 
 Bytes are real network bytes when network namespaces can be made (root and iproute2): every client
 then has a namespace and an interface of its own. Otherwise they are estimated from the message
@@ -18,7 +20,9 @@ Usage: ``python -m demos.load_demo [--clients 8] [--goals 4] [--order 500] [--ra
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -41,6 +45,9 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                         help='int32 elements added to each feedback message (2500: 10 kB)')
     parser.add_argument('--configs', default='rclpy,client,goals',
                         help='comma-separated, from: ' + ', '.join(load.CONFIG_LABELS))
+    parser.add_argument('--unguarded', default='client',
+                        help='comma-separated configurations run after them against a second '
+                             'server without the guard (empty: none)')
     parser.add_argument('--network', choices=('auto', 'netns', 'count'), default='auto',
                         help='bytes from per-client network namespaces (auto: when possible) or '
                              'estimated from message counts')
@@ -49,7 +56,8 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--no-plot', action='store_true', help='skip the PNG')
     args = parser.parse_args(argv)
     args.configs = [c.strip() for c in args.configs.split(',') if c.strip()]
-    unknown = set(args.configs) - set(load.CONFIG_LABELS)
+    args.unguarded = [c.strip() for c in args.unguarded.split(',') if c.strip()]
+    unknown = set(args.configs + args.unguarded) - set(load.CONFIG_LABELS)
     if unknown:
         parser.error(f'unknown configurations: {", ".join(sorted(unknown))}')
     return args
@@ -68,8 +76,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     progress(f'load: {spec.clients} client processes x {spec.goals} goals, {spec.order} '
              f'feedback messages per goal at {spec.rate_hz:g} Hz; configurations: '
              + ', '.join(load.CONFIG_LABELS[c] for c in args.configs))
+    machine = load.environment_facts()  # before the run: its load average is the one at the start
     result = load.run_load(spec, args.configs, progress)
-    result['machine'] = load.environment_facts()
+    if args.unguarded:
+        progress('a second server, without the guard: '
+                 + ', '.join(load.CONFIG_LABELS[c] for c in args.unguarded))
+        unguarded = load.run_load(dataclasses.replace(spec, guarded=False), args.unguarded,
+                                  progress)
+        result['phases'] += unguarded['phases']
+        load.add_ratios(result['phases'])  # against the guarded server's plain rclpy phase
+    result['machine'] = machine
+    result['load_average_at_end'] = os.getloadavg()
     result['elapsed_s'] = time.monotonic() - started
     print()
     print(load.format_table(result))

@@ -65,6 +65,7 @@ from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
 from harness import procstat
+from harness.status_model import status_array_size
 
 CONFIGS = ('rclpy', 'client', 'goals', 'upstream')
 #: Seconds before the probe goal, or its result request, is sent again.
@@ -73,22 +74,8 @@ PROBE_RESEND_S = 2.0
 _TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
                        GoalStatus.STATUS_ABORTED})
 
-#: CDR bytes of an ``action_msgs/GoalStatusArray``: the 4-byte encapsulation header and the 4-byte
-#: sequence length, then per goal a 16-byte UUID, an 8-byte stamp and a 1-byte status, padded to 28
-#: bytes but for the last (checked against ``serialize_message`` in tests/test_status_size.py).
-STATUS_ARRAY_HEADER = 8
-STATUS_ENTRY = 28
-_STATUS_LAST_PADDING = 3
-
 #: The status counters of :class:`CountingMixin`, as :meth:`LoadClient.report` gives them.
 STATUS_COUNTERS = ('status', 'status_entries', 'status_cdr_bytes')
-
-
-def status_array_size(entries: int) -> int:
-    """Serialized (CDR) size of a ``GoalStatusArray`` listing ``entries`` goals."""
-    if entries == 0:
-        return STATUS_ARRAY_HEADER
-    return STATUS_ARRAY_HEADER + STATUS_ENTRY * entries - _STATUS_LAST_PADDING
 
 
 class CountingMixin:
@@ -120,6 +107,23 @@ class CountingMixin:
             self.status_counts['status_cdr_bytes'] += status_array_size(entries)
             self.status_max_entries = max(self.status_max_entries, entries)
         return data
+
+
+def recording_feedback(base: type) -> type:
+    """A subclass of ``base`` that records in ``feedback_taken`` (a list the caller sets) the goal
+    UUID and the counter (``sequence[0]``) of every feedback message taken from rcl."""
+
+    class Counting(base):  # type: ignore[misc, valid-type]
+        def take_data(self) -> dict:
+            data = super().take_data()
+            feedback = data.get('feedback')
+            if feedback is not None:
+                self.feedback_taken.append((bytes(feedback.goal_id.uuid),
+                                            int(feedback.feedback.sequence[0])
+                                            if len(feedback.feedback.sequence) else -1))
+            return data
+
+    return Counting
 
 
 def make_client(node: Node, config: str, action: str, qos: QoSProfile) -> Any:

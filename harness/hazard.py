@@ -24,6 +24,7 @@ from typing import Any, Callable, Optional
 from harness.crash import (alive, core_backtrace, plain_env, server_command, server_env,
                            signal_name, stats_of)
 from harness.proc import Proc, python_module, run_role
+from harness.report import say
 from harness.server import HEADER
 
 EVENTS = ('update', 'destroy', 'create', 'exit')
@@ -34,10 +35,6 @@ NEVER = ('goal_id.uuid[0] = 0 AND goal_id.uuid[0] = 1',
          'goal_id.uuid[0] = 0 AND goal_id.uuid[0] = 2')
 # int32 maximum: a goal of this order keeps the server publishing for the whole cell.
 FOREVER = 2 ** 31 - 1
-
-
-def say(*words: object) -> None:
-    print(*words, flush=True)
 
 
 # ==================================================================================================

@@ -22,7 +22,7 @@ phase's clients in every phase, with the same goals, and are accounted apart (a 
 receives every goal's feedback). A phase may also run fewer clients than the run's spec
 (``run_phase(config, clients=K)``), so that one server serves phases of several sizes.
 :class:`CapturingRun` breaks the first client process's received bytes down by kind, with a packet
-capture (``benchmarks/_capture.py``, run as a child process in that client's namespace); the first
+capture (``harness/capture.py``, run as a child process in that client's namespace); the first
 client process is the first bystander when there are any.
 """
 
@@ -38,7 +38,9 @@ from typing import Any, Callable, Optional, Sequence
 
 from cft_action.client import FINISHED_GOAL_GRACE
 from harness import netns
+from harness.capture import CATEGORIES
 from harness.proc import Proc, python_module
+from harness.report import fmt, grid
 
 #: The configurations, in the order they run; ``rclpy`` (plain) first, since ratios refer to it.
 CONFIG_LABELS = {
@@ -355,6 +357,7 @@ class LoadRun:
                 report.update({k: a[k] - b[k] for k in a})
         phase = {
             'config': config,
+            'guarded': self.spec.guarded,
             'published': after['published'] - before['published'],
             'accepted': after['accepted'] - before['accepted'],
             'server_cpu_s': after['cpu_s'] - before['cpu_s'],
@@ -384,7 +387,7 @@ class LoadRun:
 class CapturingRun(LoadRun):
     """A load run that captures the first client process's received frames in every phase.
 
-    ``benchmarks/_capture.py`` runs in that client's namespace from :meth:`window_started` to
+    ``harness/capture.py`` runs in that client's namespace from :meth:`window_started` to
     :meth:`window_ended`, and the phase gets its ``anatomy``: bytes, packets and samples by kind
     (feedback data, feedback gap/heartbeat, status, discovery, other). The first client process is
     the first bystander when the spec has any, else the first of the phase's clients. Capturing
@@ -396,7 +399,7 @@ class CapturingRun(LoadRun):
         if not self.topology:
             raise RuntimeError('a packet capture needs network namespaces (root and iproute2)')
         writers = server_stats['writers']
-        argv = python_module('benchmarks._capture', netns.INTERFACE,
+        argv = python_module('harness.capture', netns.INTERFACE,
                              ','.join(writers['feedback']), ','.join(writers['status']))
         self._capture = Proc('capture', self.topology.command(self.topology.clients[0], argv),
                              self.env)
@@ -487,6 +490,38 @@ def summarize(phase: dict[str, Any], spec: LoadSpec, bytes_method: str) -> dict[
     }
 
 
+def bystander_figures(phase: dict[str, Any]) -> dict[str, Any]:
+    """What the first bystander of ``phase`` received, per feedback sample it took; with
+    :class:`CapturingRun`, also by kind (``per_sample``)."""
+    report = phase['bystanders'][0]
+    samples = report['own'] + report['foreign']
+    figures: dict[str, Any] = {
+        'neighbours': phase['n_clients'],
+        'neighbour_config': phase['config'] if phase['n_clients'] else None,
+        'published': phase['published'],
+        'samples': samples,
+        'lost': phase['published'] - samples,
+        'rx_bytes': report.get('rx_bytes'),
+        'rx_packets': report.get('rx_packets'),
+        'rx_bytes_per_sample': report['rx_bytes'] / samples if samples and 'rx_bytes' in report
+        else None,
+        'packets_per_sample': report['rx_packets'] / samples if samples and 'rx_packets' in report
+        else None,
+        'feedback_message_bytes': phase['summary']['feedback_message_bytes'],
+        'latency_p50_ms': phase['bystander_summary']['latency_p50_ms'],
+        'latency_p99_ms': phase['bystander_summary']['latency_p99_ms'],
+        'neighbour_rx_bytes_per_client': phase['summary']['bytes_per_client'],
+        'load_average_at_end': phase.get('load_average_at_end'),
+    }
+    anatomy = phase.get('anatomy')
+    if anatomy and samples:
+        figures['per_sample'] = {c: anatomy[c]['bytes'] / samples for c in CATEGORIES}
+        data = anatomy['feedback data']
+        figures['feedback_data_bytes_per_packet'] = (data['bytes'] / data['packets']
+                                                     if data['packets'] else None)
+    return figures
+
+
 def _ms(us: Optional[float]) -> Optional[float]:
     return None if us is None else us / 1000.0
 
@@ -550,8 +585,10 @@ def environment_facts() -> dict[str, Any]:
 
 # --- presentation ---------------------------------------------------------------------------------
 
-def _fmt(value: Optional[float], spec: str = '.0f') -> str:
-    return '-' if value is None else format(value, spec)
+def phase_label(phase: dict[str, Any]) -> str:
+    """The label of ``phase``'s configuration, and of its server when it ran without the guard."""
+    label = CONFIG_LABELS[phase['config']]
+    return label if phase.get('guarded', True) else f'{label}, unguarded server'
 
 
 def format_table(result: dict[str, Any]) -> str:
@@ -561,20 +598,20 @@ def format_table(result: dict[str, Any]) -> str:
              'updates', 'upd/goal', 'p50 ms', 'p99 ms', 'rate Hz', 'srv msg/s', 'srv ms/msg')]
     for phase in result['phases']:
         s = phase['summary']
-        rows.append((CONFIG_LABELS[phase['config']], _fmt(s['own_per_client']),
-                     _fmt(s['foreign_per_client']), _fmt(s['bytes_per_client'] / 1000, '.1f'),
-                     _fmt(s.get('bytes_to_own_feedback'), '.2f'), _fmt(s['client_cpu_s'], '.2f'),
-                     str(s['updates']), _fmt(s['updates_per_goal'], '.2f'),
-                     _fmt(s['latency_p50_ms'], '.2f'), _fmt(s['latency_p99_ms'], '.2f'),
-                     _fmt(s['achieved_rate_hz'], '.0f'), _fmt(s['server_msgs_per_s'], '.0f'),
-                     _fmt(s['server_cpu_ms_per_msg'], '.3f')))
+        rows.append((phase_label(phase), fmt(s['own_per_client']),
+                     fmt(s['foreign_per_client']), fmt(s['bytes_per_client'] / 1000, '.1f'),
+                     fmt(s.get('bytes_to_own_feedback'), '.2f'), fmt(s['client_cpu_s'], '.2f'),
+                     str(s['updates']), fmt(s['updates_per_goal'], '.2f'),
+                     fmt(s['latency_p50_ms'], '.2f'), fmt(s['latency_p99_ms'], '.2f'),
+                     fmt(s['achieved_rate_hz'], '.0f'), fmt(s['server_msgs_per_s'], '.0f'),
+                     fmt(s['server_cpu_ms_per_msg'], '.3f')))
     ratio_rows = [('ratio to plain', 'foreign', 'bytes', 'CPU', 'p50', 'p99', 'srv msg/s',
                    'srv ms/msg')]
     for phase in result['phases']:
         r = phase['summary'].get('ratio_to_plain')
         if r:
-            ratio_rows.append((CONFIG_LABELS[phase['config']], *(
-                _fmt(r[k], '.3f') for k in ('foreign', 'bytes', 'cpu', 'p50', 'p99',
+            ratio_rows.append((phase_label(phase), *(
+                fmt(r[k], '.3f') for k in ('foreign', 'bytes', 'cpu', 'p50', 'p99',
                                             'server_rate', 'server_cpu'))))
     first = result['phases'][0]['summary']
     header = (f"N = {spec['clients']} clients x M = {spec['goals']} goals, {spec['order']} "
@@ -587,15 +624,4 @@ def format_table(result: dict[str, Any]) -> str:
              'feedback per second per goal that the server achieved; srv msg/s and srv ms/msg = '
              'feedback the server published per second, and its CPU milliseconds per message, '
              'from go until its last goal finished']
-    return '\n'.join([header, _grid(rows), '', _grid(ratio_rows), *notes])
-
-
-def _grid(rows: list[tuple[str, ...]]) -> str:
-    widths = [max(len(row[i]) for row in rows) for i in range(len(rows[0]))]
-    lines = []
-    for n, row in enumerate(rows):
-        lines.append('  '.join(cell.ljust(w) if i == 0 else cell.rjust(w)
-                               for i, (cell, w) in enumerate(zip(row, widths))))
-        if n == 0:
-            lines.append('  '.join('-' * w for w in widths))
-    return '\n'.join(lines)
+    return '\n'.join([header, grid(rows), '', grid(ratio_rows), *notes])

@@ -5,10 +5,22 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from harness.load import CONFIG_LABELS
+from harness.load import phase_label
 
 #: One colour per configuration, the same in every plot.
 COLOURS = {'rclpy': '#7f7f7f', 'client': '#1f77b4', 'goals': '#2ca02c', 'upstream': '#d62728'}
+#: The colour of a configuration whose server ran without the guard.
+UNGUARDED_COLOURS = {'rclpy': '#c7c7c7', 'client': '#9ecae1', 'goals': '#a1d99b',
+                     'upstream': '#fc9272'}
+
+
+#: The top of the demo's panel of ratios to plain rclpy.
+RATIO_TOP = 1.25
+
+
+def phase_colour(phase: dict[str, Any]) -> str:
+    """The colour of ``phase``: its configuration's, lighter when its server was unguarded."""
+    return (COLOURS if phase.get('guarded', True) else UNGUARDED_COLOURS)[phase['config']]
 
 
 def pyplot() -> Any:
@@ -48,8 +60,8 @@ def demo_figure(result: dict[str, Any], path: Path) -> Path:
     plt = pyplot()
     phases = result['phases']
     spec = result['spec']
-    labels = [CONFIG_LABELS[p['config']].replace(' ', '\n', 1) for p in phases]
-    colours = [COLOURS[p['config']] for p in phases]
+    labels = [phase_label(p).replace(' ', '\n', 1).replace(', ', ',\n') for p in phases]
+    colours = [phase_colour(p) for p in phases]
     s = [p['summary'] for p in phases]
     x = range(len(phases))
     fig, axes = plt.subplots(2, 4, figsize=(18, 8.2))
@@ -106,15 +118,14 @@ def demo_figure(result: dict[str, Any], path: Path) -> Path:
     for j, (phase, r) in enumerate(zip(phases, ratios)):
         positions = [k + (j - (len(phases) - 1) / 2) * width for k in range(len(keys))]
         values = [r.get(k) or 0 for k in keys]
-        ax.bar(positions, values, width, color=COLOURS[phase['config']],
-               label=CONFIG_LABELS[phase['config']])
+        ax.bar(positions, values, width, color=phase_colour(phase), label=phase_label(phase))
         if phase['config'] != 'rclpy':
-            for position, value in zip(positions, values):
-                ax.text(position, value, f'{value:.2f}', ha='center', va='bottom', fontsize=7,
-                        rotation=90)
+            for position, value in zip(positions, values):  # a bar above the axis: at its top
+                ax.text(position, min(value, RATIO_TOP), f'{value:.2f}', ha='center',
+                        va='bottom' if value < RATIO_TOP else 'top', fontsize=7, rotation=90)
     ax.set_xticks(range(len(keys)), ['foreign\nmsgs', 'bytes', 'client\nCPU', 'p99\nlatency',
                                      'server\nCPU/msg'], fontsize=8)
-    ax.set_ylim(0, 1.25)
+    ax.set_ylim(0, RATIO_TOP)
     ax.axhline(1.0, color='k', lw=0.8)
     ax.set_title('ratio to plain rclpy (lower is better)')
     ax.legend(fontsize=8, loc='upper right')
@@ -122,9 +133,11 @@ def demo_figure(result: dict[str, Any], path: Path) -> Path:
     for ax in (*axes[0], axes[1][0], axes[1][1], axes[1][3]):  # the ratios have their own ticks
         ax.set_xticks(list(x), labels, fontsize=9)
     first = s[0]
+    servers = ('one guarded server' if all(p.get('guarded', True) for p in phases)
+               else 'a guarded server, then an unguarded one')
     fig.suptitle(f"{spec['clients']} client processes x {spec['goals']} goals, "
                  f"{spec['order']} feedback messages per goal at {spec['rate_hz']:g} Hz "
-                 f"({first['feedback_message_bytes']} B each), one guarded server; "
+                 f"({first['feedback_message_bytes']} B each), {servers}; "
                  f"all feedback per configuration: {first['all_feedback']}", fontsize=11)
     fig.tight_layout()
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -150,7 +163,7 @@ def _annotate(ax: Any, x: Any, heights: list[float], texts: list[str]) -> None:
     ax.margins(y=0.15)
 
 
-#: The kinds of received bytes of a packet capture (``benchmarks._capture.CATEGORIES``), with
+#: The kinds of received bytes of a packet capture (``harness.capture.CATEGORIES``), with
 #: their colours.
 CATEGORY_COLOURS = {'feedback data': '#1f77b4', 'feedback gap/heartbeat': '#aec7e8',
                     'status': '#ff7f0e', 'discovery': '#2ca02c', 'other': '#c7c7c7'}

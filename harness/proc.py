@@ -18,6 +18,7 @@ import inspect
 import json
 import os
 import resource
+import shutil
 import signal
 import subprocess
 import sys
@@ -38,6 +39,15 @@ def python_module(module: str, *args: object) -> list[str]:
     ``tests.helpers.publisher``); a :class:`Proc` finds it through ``PYTHONPATH``.
     """
     return [sys.executable, '-u', '-m', module, *map(str, args)]
+
+
+def guard_command() -> list[str]:
+    """``cft-action guard --``, from this interpreter's environment."""
+    beside = Path(sys.executable).with_name('cft-action')
+    found = str(beside) if beside.exists() else shutil.which('cft-action')
+    if found:
+        return [found, 'guard', '--']
+    return [sys.executable, '-m', 'cft_action.cli', 'guard', '--']
 
 
 def root_on_path(env: Mapping[str, str]) -> dict[str, str]:
@@ -199,6 +209,19 @@ class Proc:
     def tail(self, n: int = 30) -> str:
         """The last ``n`` lines, under a header with the name and exit status, for messages."""
         return f'--- {self.name} (rc={self.popen.returncode}) ---\n' + '\n'.join(self.lines[-n:])
+
+
+def main_or_role(main: Callable[[list[str]], int], roles: dict[str, Callable[..., int]],
+                 argv: Optional[Sequence[str]] = None) -> int:
+    """The entry point of a script whose roles run as its own child processes.
+
+    ``_role NAME ARGS...`` runs the role NAME of ``roles`` (:func:`run_role`); anything else is the
+    script's command line, for ``main``. ``argv`` defaults to ``sys.argv[1:]``.
+    """
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] == '_role':
+        return run_role(argv[1:], roles)
+    return main(argv)
 
 
 def run_role(argv: Sequence[str], roles: dict[str, Callable[..., int]]) -> int:

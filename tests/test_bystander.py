@@ -2,14 +2,14 @@
 
 One server, two phases: the bystander next to 2 ``client``-mode clients, then alone
 (``run_phase(config, clients=0)``). Bytes are estimated from message counts (no network
-namespaces): this checks the bookkeeping that ``benchmarks/bystander.py`` relies on, not figures.
+namespaces): this checks the bookkeeping, and :func:`harness.load.bystander_figures`, that
+``benchmarks/bystander.py`` relies on, not figures.
 """
 
 from __future__ import annotations
 
 import pytest
 
-from benchmarks import bystander
 from harness import load
 
 NEIGHBOURS, GOALS, ORDER = 2, 1, 10
@@ -50,7 +50,7 @@ def test_the_neighbours_figures_leave_the_bystander_out(phases):
 
 
 def test_bystander_figures_per_sample(phases):
-    rows = [bystander.bystander_figures(p) for p in phases]
+    rows = [load.bystander_figures(p) for p in phases]
     assert [r['neighbours'] for r in rows] == [NEIGHBOURS, 0]
     assert [r['lost'] for r in rows] == [0, 0]
     assert rows[0]['neighbour_config'] == 'client' and rows[1]['neighbour_config'] is None

@@ -12,17 +12,22 @@ from tests.support import action_server
 README = Path(__file__).parent.parent / 'README.md'
 
 
-def readme_example(name: str) -> str:
-    match = re.search(rf'<!-- example: {name} -->\n```python\n(.*?)```', README.read_text(),
+def readme_example(name: str, language: str = 'python') -> str:
+    """The code block marked ``<!-- example: name -->`` in the README."""
+    match = re.search(rf'<!-- example: {name} -->\n```{language}\n(.*?)```', README.read_text(),
                       re.DOTALL)
     assert match, f'README has no example {name}'
     return match.group(1)
 
 
-def test_readme_starts_with_the_set_up_commands():
-    first_block = re.search(r'```bash\n(.*?)```', README.read_text(), re.DOTALL).group(1)
-    assert [line.split('#')[0].strip() for line in first_block.splitlines()] == \
-        ['make demo', 'make test', 'make lint']
+def test_readme_gives_the_two_set_up_commands_first():
+    """``make demo`` and ``make test`` do all the set-up on a fresh machine (the Makefile), and
+    the README gives them before any other command of this repository."""
+    readme = README.read_text()
+    commands = [line.split('#')[0].strip()
+                for line in readme_example('set_up', 'bash').splitlines()]
+    assert commands == ['make demo', 'make test']
+    assert readme.index('<!-- example: set_up -->') < readme.index('make lint')
 
 
 def run_tutorial_client(directory: Path, *, client_env: Optional[dict] = None,

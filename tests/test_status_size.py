@@ -1,5 +1,6 @@
-"""The status topic's size model: serialized ``GoalStatusArray`` sizes, and the wire model built on
-them (``benchmarks/status.py``), against rclpy's own serialization."""
+"""The status topic's size model (:mod:`harness.status_model`, which ``benchmarks/status.py`` uses):
+serialized ``GoalStatusArray`` sizes, and the wire model built on them, against rclpy's own
+serialization and captured frames."""
 
 from __future__ import annotations
 
@@ -7,8 +8,7 @@ import pytest
 from action_msgs.msg import GoalStatus, GoalStatusArray
 from rclpy.serialization import serialize_message
 
-from benchmarks.status import entries_in, predict, wire_bytes
-from harness.client import status_array_size
+from harness.status_model import entries_in, predict, status_array_size, wire_bytes
 
 
 @pytest.mark.parametrize('entries', [0, 1, 2, 3, 64, 513])

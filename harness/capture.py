@@ -1,7 +1,7 @@
 """Where a client's received bytes go: a packet capture on the client's own interface.
 
 Run inside a client's network namespace (needs root, as the namespaces do):
-``python -m benchmarks._capture INTERFACE FEEDBACK_GUIDS STATUS_GUIDS`` (GUIDs in hex,
+``python -m harness.capture INTERFACE FEEDBACK_GUIDS STATUS_GUIDS`` (GUIDs in hex,
 comma-separated). It prints
 ``SNIFFING`` once it listens, and on the line ``stop`` prints ``RESULT <json>``: received bytes
 and packets (whole Ethernet frames, as ``rx_bytes`` counts them) by category, and ``samples``: the
