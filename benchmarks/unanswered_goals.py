@@ -177,7 +177,8 @@ def _goal_uuid_of(client: Any, future: Any) -> Optional[str]:
         if pending is future or _forwards_to(pending, future):
             goal_id = client._goal_sequence_number_to_goal_id.get(sequence_number)
             return None if goal_id is None else bytes(goal_id.uuid).hex()
-    for held in getattr(client, '_held', []):
+    held_goals = getattr(client, '_held_goals', None)  # cft_action's, not plain rclpy's
+    for held in held_goals.waiting if held_goals is not None else ():
         if held.future is future:
             return 'held:' + bytes(held.goal_uuid.uuid).hex()
     return None

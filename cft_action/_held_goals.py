@@ -93,6 +93,11 @@ class HeldGoals:
         self.count = 0  # requests held since construction
         self._timer = PausedTimer(node, poll_period, self._poll, callback_group)
 
+    @property
+    def waiting(self) -> tuple[HeldGoal, ...]:
+        """The goals held now, oldest first."""
+        return tuple(self._queue)
+
     def needed(self) -> int:
         """The latest version that a held request waits for; 0 when none waits."""
         return max((held.version for held in self._queue), default=0)
