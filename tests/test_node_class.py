@@ -13,8 +13,11 @@ import pytest
 from rcl_interfaces.msg import ParameterEvent
 from rclpy.serialization import serialize_message
 
-from cft_action import _native
-from cft_action.parameter_events import ALL_NODES, NO_NODES, node_filter
+from cft_action import _native, ContentFilterError, guard
+from cft_action.parameter_events import ALL_NODES, NO_NODES, node_filter, ParameterEventHandler
+from harness.ros import unique_name
+from tests.support import helper_process
+from tests.test_parameter_events import BURST, burst, sync
 
 EVERY, NONE, NOT_COMPILED, UNREADABLE = 1, 0, -1, -2
 
@@ -99,3 +102,44 @@ def test_an_event_whose_node_cannot_be_read_is_reported(verdict):
     good = event('/a')
     assert verdict("node = '/a'", good[:14]) == UNREADABLE  # the string is cut off
     assert verdict("node = '/a'", b'\0\x06' + good[2:]) == UNREADABLE  # not plain CDR
+
+
+@pytest.mark.parametrize('guarded', [False, True], ids=['unguarded-nodes', 'guarded-nodes'])
+def test_only_guarded_nodes_filter_on_their_side(ros, guarded):
+    """A node that nobody put under the guard sends the handler every event, and the handler's
+    reader drops the unwatched node's; a guarded node's writer does not send them."""
+    prefix = '/' + unique_name('cft_nc')
+    watched, other = f'{prefix}/watched', f'{prefix}/other'
+    child = helper_process('harness.param_nodes', [watched, other],
+                           env=guard.environment() if guarded else None)
+    try:
+        handler = ParameterEventHandler(ros.node)
+        values = []
+        handler.add_parameter_callback('value', watched,
+                                       lambda p: values.append(p.value.integer_value))
+        assert child.request('matched 1', 'MATCHED') == 'MATCHED'
+        sync(ros, handler, child, [watched])
+        reader = handler._filter.reader
+        judged = reader.reader_verdicts
+        assert burst(ros, handler, child, expected=BURST) == BURST  # the watched node's only
+        assert values == list(range(1, BURST + 1))
+        state = handler.parameter_event_filter_state
+        if guarded:
+            assert reader.reader_verdicts == judged, 'the writer sent events the filter rejects'
+            assert state.filtered_in == 'writer'
+        else:
+            assert reader.reader_verdicts - judged >= 2 * BURST  # both nodes' events came
+            assert state.filtered_in == 'reader'
+        handler.destroy()
+    finally:
+        alive = child.poll() is None
+        child.stop()
+    assert alive, f'param_nodes.py died\n{child.tail()}'
+
+
+def test_a_dds_sql_expression_of_ones_own_needs_writer_filtering_any(ros):
+    handler = ParameterEventHandler(ros.node)
+    with pytest.raises(ContentFilterError, match="writer_filtering='any'"):
+        handler.set_parameter_event_filter('node = %0 AND stamp.sec > %1', ['/a', 3])
+    assert handler.get_parameter_event_filter() == (NO_NODES, [])
+    handler.destroy()
