@@ -18,8 +18,8 @@ setup(
         Extension(
             'cft_action._cftguard',
             sources=['cft_action/_guard.c', 'cft_action/_guard_filter.c',
-                     'cft_action/_guard_writer_qos.c', 'cft_action/_uuid_class.c',
-                     'cft_action/_uuid_program.c'],
+                     'cft_action/_guard_writer_qos.c', 'cft_action/_filter_class.c',
+                     'cft_action/_uuid_program.c', 'cft_action/_node_program.c'],
             libraries=['dl', 'pthread'],
             # Export only the interposed Fast DDS and rmw_fastrtps functions and the cft_guard_*
             # C API.
@@ -30,8 +30,8 @@ setup(
         Extension(
             'cft_action._cftreader',
             sources=['cft_action/_reader_lock.c', 'cft_action/_reader_class.c',
-                     'cft_action/_patch.c', 'cft_action/_uuid_class.c',
-                     'cft_action/_uuid_program.c'],
+                     'cft_action/_patch.c', 'cft_action/_filter_class.c',
+                     'cft_action/_uuid_program.c', 'cft_action/_node_program.c'],
             libraries=['dl', 'pthread'],
             extra_compile_args=['-O2', '-fvisibility=hidden', '-Wall'],
         ),

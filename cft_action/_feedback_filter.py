@@ -25,13 +25,14 @@ class FeedbackFilter:
 
     :param logger: The client's logger.
     :param mode: ``'client'``, ``'goals'`` or ``'off'``.
-    :param uuid_class: Filter with the library's own filter class (``writer_filtering='guarded'``).
+    :param filter_class: The library's filter class to filter with (``writer_filtering='guarded'``),
+        or None for DDS-SQL.
     """
 
-    def __init__(self, logger: PromptLogger, mode: str, *, uuid_class: bool) -> None:
+    def __init__(self, logger: PromptLogger, mode: str, *, filter_class: Optional[str]) -> None:
         self.mode = mode
         self.reader = FilteredReader(
-            logger, match_all=MATCH_ALL, uuid_class=uuid_class,
+            logger, match_all=MATCH_ALL, filter_class=filter_class,
             unfiltered='feedback filter not used, all feedback is received as with rclpy')
         self.plan: Optional[GoalFilterPlan] = None  # None: the filter is not (or no longer) used
         self.installed = False  # whether install() ran
@@ -125,19 +126,7 @@ class FeedbackFilter:
 
     def filtered_in(self, feedback_taken: int) -> str:
         """Where other goals' feedback is dropped; see :class:`cft_action.FeedbackFilterState`."""
-        if self.reader.filter is None:
-            return 'none'
-        if not self.reader.uuid_class:
-            return 'writer'  # DDS-SQL: every Fast DDS writer filters (up to its reader limit)
-        verdicts = self.reader.reader_verdicts
-        if verdicts is None:
-            return 'unknown'
-        # A guarded writer marks what it sends, so the reader judges only the samples sent in
-        # the moment between a filter change here and its arrival there; an unguarded one marks
-        # nothing, and the reader judges every sample, other goals' included.
-        if verdicts and verdicts >= feedback_taken:
-            return 'reader'
-        return 'writer' if feedback_taken else 'unknown'
+        return self.reader.filtered_in(feedback_taken)
 
     def log_if_unguarded(self, feedback_taken: int) -> None:
         """Say once that the server does not filter for this client, once there is evidence."""

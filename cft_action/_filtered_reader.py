@@ -27,6 +27,7 @@ The owners, :class:`cft_action.ActionClient`, :class:`cft_action.ParameterEventH
 
 from __future__ import annotations
 
+import os
 import threading
 from typing import Any, ContextManager, NamedTuple, Optional, Sequence
 
@@ -34,7 +35,7 @@ import rclpy
 
 from cft_action import _rcl, sql
 from cft_action._rclpy_compat import PromptLogger
-from cft_action.errors import ContentFilterError
+from cft_action.errors import ContentFilterError, InvalidArgumentError
 from cft_action.filters import ContentFilterOptions, dds_literals, Literal
 
 __all__ = ['FilteredReader', 'ReaderFilterState', 'get_filter', 'has_filter', 'set_filter']
@@ -51,13 +52,14 @@ def set_filter(subscription_ptr: int, topic: str, expression: str,
         the expression is empty, a parameter cannot be quoted, :mod:`cft_action.sql` rejects the
         expression, rcl fails, or the rmw does not apply it.
     """
-    return _set_filter(subscription_ptr, topic, expression, expression_parameters)[0]
+    return apply_filter(subscription_ptr, topic, expression, expression_parameters)[0]
 
 
-def _set_filter(subscription_ptr: int, topic: str, expression: str,
+def apply_filter(subscription_ptr: int, topic: str, expression: str,
                 expression_parameters: Sequence[Literal] = (), *,
-                uuid_class: bool = False) -> tuple[ContentFilterOptions, Optional[int]]:
-    """:func:`set_filter`, optionally with the uuid filter class (:func:`_rcl.set_content_filter`).
+                filter_class: Optional[str] = None) -> tuple[ContentFilterOptions, Optional[int]]:
+    """:func:`set_filter`, optionally with one of the library's filter classes
+    (:func:`_rcl.set_content_filter`).
 
     :return: the filter as set, and the filter object it created in this process, if any.
     :raises ContentFilterError: naming the expression and the topic, with rcl's error string, if
@@ -84,7 +86,7 @@ def _set_filter(subscription_ptr: int, topic: str, expression: str,
     with _rcl_lock:
         try:
             created = _rcl.set_content_filter(subscription_ptr, expression, parameters,
-                                              uuid_class=uuid_class)
+                                              filter_class=filter_class)
         except ContentFilterError as e:
             raise ContentFilterError(f'{described} was rejected: {e.rcl_error}',
                                      function=e.function, ret=e.ret, rcl_error=e.rcl_error) from e
@@ -131,6 +133,32 @@ class ReaderFilterState(NamedTuple):
         return self._replace(active=False, reason=reason, expression='', expression_parameters=())
 
 
+#: Environment variable with which operators override the ``writer_filtering`` argument of
+#: :class:`cft_action.ActionClient` and :class:`cft_action.ParameterEventHandler`.
+WRITER_FILTERING_ENV = 'CFT_ACTION_WRITER_FILTERING'
+
+#: Which writers may filter: ``'guarded'`` (the default), only those in a process run under
+#: ``cft-action guard``, which know the library's filter classes; ``'any'``, every Fast DDS
+#: writer, with a DDS-SQL filter, which costs an unguarded writer's process time and can crash it
+#: (docs/SAFETY.md).
+WRITER_FILTERING = ('guarded', 'any')
+
+
+def filter_class_for(writer_filtering: str, guarded_class: str) -> Optional[str]:
+    """The filter class for ``writer_filtering`` (or its environment variable, which wins).
+
+    :param guarded_class: the library's class for ``'guarded'``; ``'any'`` gives None, DDS-SQL.
+    :raises ValueError: if the value names no known choice, saying where it came from.
+    """
+    value = os.environ.get(WRITER_FILTERING_ENV) or writer_filtering
+    if value not in WRITER_FILTERING:
+        source = (f'environment variable {WRITER_FILTERING_ENV}'
+                  if os.environ.get(WRITER_FILTERING_ENV) else 'writer_filtering')
+        raise InvalidArgumentError(
+            f'{source}={value!r}: expected one of {", ".join(WRITER_FILTERING)}')
+    return guarded_class if value == 'guarded' else None
+
+
 class FilteredReader:
     """The content filter of one subscription, from its installation to its end.
 
@@ -144,16 +172,20 @@ class FilteredReader:
     :param unfiltered: what happens without the filter, for that warning, e.g.
         ``'feedback filter not used, all feedback is received as with rclpy'``.
     :param match_all: an expression that every sample of the topic matches.
-    :param uuid_class: filter with the library's own filter class (cft_action/_uuid_class.h),
-        which only a guarded server's writers know, instead of DDS-SQL, which every Fast DDS
-        writer evaluates; the expressions must then be goal_id.uuid filters.
+    :param filter_class: filter with this one of the library's own filter classes
+        (cft_action/_filter_class.h), which only guarded writers know, instead of DDS-SQL, which
+        every Fast DDS writer evaluates; the expressions must then be in that class's grammar.
     """
 
     def __init__(self, logger: PromptLogger, *, unfiltered: str, match_all: str,
-                 uuid_class: bool = False) -> None:
+                 filter_class: Optional[str] = None) -> None:
         self.lock = threading.RLock()
-        self.uuid_class = uuid_class
-        self._created: Optional[int] = None  # the uuid filter object created in this process
+        self.filter_class = filter_class
+        # The class's filter object created in this process, and its verdicts once it is gone;
+        # under their own lock, which is taken alone, so that the verdicts can be read from a
+        # callback that must not wait for the reader's lock.
+        self._verdicts_lock = threading.Lock()
+        self._created: Optional[int] = None
         self._reader_verdicts = 0
         self._topic = ''
         self._logger = logger
@@ -181,8 +213,10 @@ class FilteredReader:
             self._topic = topic
             try:
                 with handle:
-                    self._filter, self._created = _set_filter(
-                        subscription_ptr, self._topic, *options, uuid_class=self.uuid_class)
+                    self._filter, created = apply_filter(
+                        subscription_ptr, self._topic, *options, filter_class=self.filter_class)
+                with self._verdicts_lock:
+                    self._created = created
             except ContentFilterError as e:
                 self.fall_back(f'installing the filter failed: {e}')
                 return False
@@ -190,11 +224,17 @@ class FilteredReader:
             return True
 
     def adopt(self, handle: ContextManager[Any], subscription_ptr: int, topic: str,
-              options: ContentFilterOptions) -> None:
-        """Take over a subscription that was created with ``options`` as its first filter."""
+              options: ContentFilterOptions, created: Optional[int] = None) -> None:
+        """Take over a subscription that was created with ``options`` as its first filter.
+
+        :param created: the filter object of :attr:`filter_class` that this process created for
+            it, if any (:func:`cft_action.subscription.subscribe_filtered`).
+        """
         with self.lock:
             self._topic = topic
             self._handle, self._pointer, self._filter = handle, subscription_ptr, options
+            with self._verdicts_lock:
+                self._created = created
 
     def change(self, options: ContentFilterOptions) -> bool:
         """Change the filter in place, if it differs; the filter stays as it was on failure.
@@ -209,8 +249,8 @@ class FilteredReader:
             if options == self._filter:
                 return False
             with self._handle:
-                self._filter = _set_filter(self._pointer, self._topic, *options,
-                                           uuid_class=self.uuid_class)[0]
+                self._filter = apply_filter(self._pointer, self._topic, *options,
+                                           filter_class=self.filter_class)[0]
             self._updates += 1
             return True
 
@@ -234,8 +274,8 @@ class FilteredReader:
             if self._filter is not None and self._handle is not None:
                 try:
                     with self._handle:
-                        _set_filter(self._pointer, self._topic, self._match_all,
-                                    uuid_class=self.uuid_class)
+                        apply_filter(self._pointer, self._topic, self._match_all,
+                                    filter_class=self.filter_class)
                     self._updates += 1
                 except ContentFilterError as e:
                     reason += ('; and letting everything through failed too, samples may be '
@@ -252,8 +292,10 @@ class FilteredReader:
     def detach(self, reason: str) -> None:
         """The subscription is being destroyed: no call reaches it from now on."""
         with self.lock:
-            self._reader_verdicts = self.reader_verdicts or 0
-            self._created = None  # freed with the subscription's filtered topic
+            with self._verdicts_lock:
+                if self._created is not None:
+                    self._reader_verdicts = _rcl.filter_class_verdicts(self._created)
+                self._created = None  # freed with the subscription's filtered topic
             self._filter, self._handle, self._reason, self._ended = None, None, reason, True
 
     # --- what it reports ------------------------------------------------------------------------
@@ -265,14 +307,36 @@ class FilteredReader:
 
     @property
     def reader_verdicts(self) -> Optional[int]:
-        """Samples that this process's uuid filter judged itself, which the writer did not filter.
+        """Samples that this process's filter judged itself, which the writer did not filter.
 
-        None when unknown: not the uuid class, or its filter was created by the preloaded guard.
+        None when unknown: not a filter class of the library's, or its filter was created by the
+        preloaded guard.
         """
-        with self.lock:
+        with self._verdicts_lock:
             if self._created is None:
-                return self._reader_verdicts if self._ended and self.uuid_class else None
-            return _rcl.uuid_filter_verdicts(self._created)
+                return self._reader_verdicts if self._ended and self.filter_class else None
+            return _rcl.filter_class_verdicts(self._created)
+
+    def filtered_in(self, taken: int) -> str:
+        """Where the samples that the filter rejects are dropped, ``taken`` samples in.
+
+        ``'writer'`` (by the writers), ``'reader'`` (by this reader: the writers do not know the
+        filter's class), ``'none'`` (no filter) or ``'unknown'`` (nothing taken yet, or the
+        filter was created by the preloaded guard, whose verdicts are not counted per filter).
+        """
+        if self._filter is None:  # one reference read: this does not take the reader's lock
+            return 'none'
+        if not self.filter_class:
+            return 'writer'  # DDS-SQL: every Fast DDS writer filters (up to its reader limit)
+        verdicts = self.reader_verdicts
+        if verdicts is None:
+            return 'unknown'
+        # A guarded writer marks what it sends, so the reader judges only the samples sent in the
+        # moment between a filter change here and its arrival there; an unguarded one marks
+        # nothing, and the reader judges every sample, the rejected ones included.
+        if verdicts and verdicts >= taken:
+            return 'reader'
+        return 'writer' if taken else 'unknown'
 
     @property
     def updates(self) -> int:

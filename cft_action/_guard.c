@@ -39,7 +39,7 @@
 #include <unistd.h>
 
 #include "_guard.h"
-#include "_uuid_class.h"
+#include "_filter_class.h"
 
 // ---- public state codes (mirrored in cft_action/guard.py) ---------------------------------------
 #define CFT_GUARD_ARMED 0        // preloaded; no Fast DDS resolved yet (none loaded, or not used)
@@ -52,7 +52,7 @@
 // vtable slot is a relocation against its exported name), is where _guard_filter.c answers
 // uuid-only filters without deserializing the sample; the fifth,
 // DomainParticipantImpl::find_content_filter_factory, gives the writers the library's own filter
-// class (_uuid_class.h). Only Fast DDS 2.14 has the last two here.
+// classes (_filter_class.h). Only Fast DDS 2.14 has the last two here.
 enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND = 4, FN_COUNT = 5 };
 
 // Fast DDS 2.x (libfastrtps), verified on 2.14.5 (ROS 2 Jazzy wheels).
@@ -97,7 +97,7 @@ static struct family families[] = {
 #define N_FAMILIES ((int)(sizeof(families) / sizeof(families[0])))
 
 static unsigned long call_counts[FN_LOCKED];
-static unsigned long uuid_class_lookups, uuid_class_filters;  // cft_guard_uuid_class_count
+static unsigned long filter_class_lookups, filter_class_filters;  // cft_guard_filter_class_count
 static unsigned long degraded_count;     // nested acquisitions that gave up (see lock_writer)
 static int loaded_after_fastdds;         // set by the constructor
 static char late_reason[512];
@@ -414,15 +414,15 @@ bool cft_evaluate2(const void *self, const void *payload, const void *sample_inf
   return real(self, payload, sample_info, reader_guid);
 }
 
-// The writers of a guarded server filter for readers of the library's class: every filter change
-// is locked here. Unguarded (an unknown Fast DDS), the class stays unknown to the server, which
+// The writers of a guarded server filter for readers of the library's classes: every filter change
+// is locked here. Unguarded (an unknown Fast DDS), the classes stay unknown to the server, which
 // then sends such readers everything, as to plain ones.
 CFT_EXPORT void *cft_find2(void *self, const char *class_name) __asm__(FIND2);
 void *cft_find2(void *self, const char *class_name) {
   struct family *f = ready(0);
-  void *ours = cft_uuid_factory_for(class_name);
+  void *ours = cft_filter_factory_for(class_name);
   if (ours != NULL && f->state == CFT_GUARD_ACTIVE) {
-    __atomic_fetch_add(&uuid_class_lookups, 1, __ATOMIC_RELAXED);
+    __atomic_fetch_add(&filter_class_lookups, 1, __ATOMIC_RELAXED);
     return ours;
   }
   typedef void *(*find_fn)(void *, const char *);
@@ -434,18 +434,19 @@ void *cft_find2(void *self, const char *class_name) {
   return real(self, class_name);
 }
 
-bool cft_uuid_class_may_create(void) { return true; }
-void cft_uuid_class_created(void *filter) {
+bool cft_filter_class_may_create(void) { return true; }
+void cft_filter_class_created(void *filter) {
   (void)filter;
-  __atomic_fetch_add(&uuid_class_filters, 1, __ATOMIC_RELAXED);
+  __atomic_fetch_add(&filter_class_filters, 1, __ATOMIC_RELAXED);
 }
 
-// 0: lookups of the library's filter class answered; 1: filters of that class created (for the
-// writers and readers of this process); 2: their verdicts; 3: filters created or changed.
-CFT_EXPORT unsigned long cft_guard_uuid_class_count(int which) {
-  if (which == 2) return cft_uuid_class_total_verdicts();
-  if (which == 3) return cft_uuid_class_total_changes();
-  return __atomic_load_n(which == 0 ? &uuid_class_lookups : &uuid_class_filters, __ATOMIC_RELAXED);
+// 0: lookups of the library's filter classes answered; 1: filters of those classes created (for
+// the writers and readers of this process); 2: their verdicts; 3: filters created or changed.
+CFT_EXPORT unsigned long cft_guard_filter_class_count(int which) {
+  if (which == 2) return cft_filter_class_total_verdicts();
+  if (which == 3) return cft_filter_class_total_changes();
+  return __atomic_load_n(which == 0 ? &filter_class_lookups : &filter_class_filters,
+                         __ATOMIC_RELAXED);
 }
 
 static void *our_definition(int fam, int fn) {

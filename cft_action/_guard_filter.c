@@ -40,6 +40,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "_cdr.h"
 #include "_guard.h"
 #include "_uuid_program.h"
 
@@ -91,7 +92,7 @@ static bool layout_failed;  // set once, read without a lock: verdicts then all 
 static const char *layout_failure;  // what did not look right; said at the first DDS-SQL verdict
 
 // Said only once a DDS-SQL filter is evaluated, when it matters: the library's own clients use
-// their own filter class (_uuid_class.h), which never comes here, and a server that only has such
+// their own filter classes (_filter_class.h), which never comes here, and a server that only has such
 // clients, or none, has nothing to be told.
 static void say_layout_failure(void) {
   static bool said;

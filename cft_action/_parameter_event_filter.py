@@ -25,7 +25,7 @@ from cft_action.arrival import ArrivalGate, ProbeTarget, RemotePublishers
 from cft_action.errors import ContentFilterError
 from cft_action.filters import (ContentFilterOptions, dds_literal, dds_literals, Literal,
                                 never_match_on)
-from cft_action.subscription import create_filtered_subscription
+from cft_action.subscription import subscribe_filtered
 
 __all__ = ['ALL_NODES', 'NO_NODES', 'PARAMETER_EVENTS_TOPIC', 'ParameterEventFilter',
            'ParameterEventFilterState', 'node_filter']
@@ -72,6 +72,12 @@ class ParameterEventFilterState(NamedTuple):
         middleware acknowledges nothing, so until it arrives a publisher still applies its previous
         filter, narrower or wider, and drops what that one rejects (in mode ``'all'`` too).
         :meth:`ParameterEventHandler.wait_for_filter` proves the arrival and sets it back to True.
+    :ivar filtered_in: where the events of unwatched nodes are dropped: ``'writer'`` (the nodes'
+        writers do not send them: nodes run under the guard, or ``writer_filtering='any'``),
+        ``'reader'`` (they cross the network and this handler's DDS reader drops them before
+        Python: nodes nobody put under the guard), ``'none'`` (not filtered) or ``'unknown'``
+        (no event yet to tell). With both kinds of node, ``'reader'`` once the reader has judged
+        as many events as it took.
     """
 
     mode: str
@@ -83,6 +89,7 @@ class ParameterEventFilterState(NamedTuple):
     watched_nodes: tuple[str, ...]
     events_received: int
     confirmed: bool
+    filtered_in: str = 'unknown'
 
 
 def is_quotable(node_name: str) -> bool:
@@ -94,15 +101,17 @@ def is_quotable(node_name: str) -> bool:
     return True
 
 
-def node_filter(node_names: Sequence[str]) -> ContentFilterOptions:
+def node_filter(node_names: Sequence[str], *, parameters: bool = True) -> ContentFilterOptions:
     """Return the filter that matches the parameter events of exactly ``node_names``.
 
     The names are sorted, so that the same set always gives the same expression. Up to 100 names
     are passed as parameters, ``node = %0 OR node = %1 ...``, each quoted as a DDS literal; beyond
-    Fast DDS's 100 parameters, the quoted names are written into the expression itself. No names
-    give :data:`NO_NODES`.
+    Fast DDS's 100 parameters, or without ``parameters``, the quoted names are written into the
+    expression itself, as the library's node filter class takes them. No names give
+    :data:`NO_NODES`.
 
     :param node_names: Fully qualified node names, as in ``ParameterEvent.node``.
+    :param parameters: Whether to pass the names as expression parameters.
     :raises ValueError: if a name contains a quote character, which no DDS literal can hold (and
         no ROS node name contains).
     """
@@ -110,7 +119,7 @@ def node_filter(node_names: Sequence[str]) -> ContentFilterOptions:
     if not names:
         return ContentFilterOptions(NO_NODES, [])
     literals = dds_literals(names)
-    if len(names) <= MAX_EXPRESSION_PARAMETERS:
+    if parameters and len(names) <= MAX_EXPRESSION_PARAMETERS:
         return ContentFilterOptions(
             ' OR '.join(f'{NODE_FIELD} = %{i}' for i in range(len(names))), literals)
     return ContentFilterOptions(' OR '.join(f'{NODE_FIELD} = {lit}' for lit in literals), [])
@@ -138,16 +147,20 @@ class ParameterEventFilter:
     """Which parameter events the handler's subscription lets through, and the proof of arrival.
 
     Its reader's lock guards every change. It is never taken while rclpy's callback registry's
-    mutex is held, and :attr:`state` is a snapshot read without it, so a callback that reads the
-    state cannot deadlock against an add or remove in another thread.
+    mutex is held, and :attr:`state` is a snapshot read without it (its ``filtered_in`` takes only
+    the reader's verdict lock), so a callback that reads the state cannot deadlock against an add
+    or remove in another thread.
 
     :param node: The handler's node.
     :param logger: The handler's logger.
+    :param filter_class: The library's node filter class, which only guarded nodes' writers
+        evaluate, or None for DDS-SQL, which every node's writer evaluates.
     """
 
-    def __init__(self, node: Node, logger: PromptLogger) -> None:
+    def __init__(self, node: Node, logger: PromptLogger, *,
+                 filter_class: Optional[str] = None) -> None:
         self.reader = FilteredReader(
-            logger, match_all=ALL_NODES,
+            logger, match_all=ALL_NODES, filter_class=filter_class,
             unfiltered='parameter event filter not used, all parameter events are received as '
                        'with rclpy')
         self._logger = logger
@@ -166,7 +179,8 @@ class ParameterEventFilter:
         """The latest snapshot, with the events received so far."""
         with self._received_lock:
             received = self._received
-        return self._state._replace(events_received=received)
+        return self._state._replace(events_received=received,
+                                    filtered_in=self.reader.filtered_in(received))
 
     def subscribe(self, node: Node, deliver: Callable[[ParameterEvent], None],
                   cft_supported: bool, **kwargs: Any) -> Subscription:
@@ -191,17 +205,17 @@ class ParameterEventFilter:
                         f'the rmw implementation {rclpy.get_rmw_implementation_identifier()} has '
                         'no content filter')
                 else:
+                    nothing = ContentFilterOptions(NO_NODES, [])
                     try:
-                        subscription = create_filtered_subscription(
+                        subscription, created = subscribe_filtered(
                             node, ParameterEvent, PARAMETER_EVENTS_TOPIC, callback, qos_profile,
-                            NO_NODES, **kwargs)
+                            *nothing, filter_class=self.reader.filter_class, **kwargs)
                     except ContentFilterError as e:
                         self.reader.fall_back(f'installing the filter failed: {e}')
                     else:
                         with subscription.handle:
                             self.reader.adopt(subscription.handle, subscription.handle.pointer,
-                                              PARAMETER_EVENTS_TOPIC,
-                                              ContentFilterOptions(NO_NODES, []))
+                                              PARAMETER_EVENTS_TOPIC, nothing, created)
                         return subscription
                 return node.create_subscription(ParameterEvent, PARAMETER_EVENTS_TOPIC,
                                                 callback, qos_profile, **kwargs)
@@ -264,8 +278,12 @@ class ParameterEventFilter:
                 changed = self.reader.change(options)
             except ContentFilterError as e:
                 # An in-place change that rmw_fastrtps rejects leaves the reader as it was.
+                hint = ('' if self.reader.filter_class is None else
+                        f" (the handler filters with the {self.reader.filter_class} class, which "
+                        "takes only \"node = 'NAME' OR ...\"; for DDS-SQL, create it with "
+                        "writer_filtering='any')")
                 raise ContentFilterError(
-                    f'parameter event filter {filter_expression!r} was rejected, the filter '
+                    f'parameter event filter {filter_expression!r} was rejected{hint}, the filter '
                     f'stays {previous.filter_expression!r}: {e}', function=e.function,
                     ret=e.ret, rcl_error=e.rcl_error) from e
             if changed:
@@ -277,7 +295,7 @@ class ParameterEventFilter:
         """See :meth:`ParameterEventHandler.configure_nodes_filter`."""
         try:
             if node_names:
-                self.set_user(*node_filter(node_names))
+                self.set_user(*self._node_filter(node_names))
             else:
                 self.set_user('', ())
         except (ContentFilterError, ValueError) as e:
@@ -315,7 +333,11 @@ class ParameterEventFilter:
             return 'user', '', self._user
         if self._event_callbacks:
             return 'all', _EVENT_CALLBACK_REASON, ContentFilterOptions(ALL_NODES, [])
-        return 'nodes', '', node_filter([n for n in self._watched if is_quotable(n)])
+        return 'nodes', '', self._node_filter([n for n in self._watched if is_quotable(n)])
+
+    def _node_filter(self, node_names: Sequence[str]) -> ContentFilterOptions:
+        # The library's class takes no parameters: its names are in the expression.
+        return node_filter(node_names, parameters=self.reader.filter_class is None)
 
     def _refresh(self) -> None:
         """Bring the middleware's filter in line with the callbacks, if it differs from them."""

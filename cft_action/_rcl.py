@@ -197,11 +197,11 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'cft_reader_lock_install': (_reader_lock, ctypes.c_int, [], None),
     'cft_reader_lock_error': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_reader_lock_count': (_reader_lock, ctypes.c_ulong, [ctypes.c_int], None),
-    'cft_uuid_class_install': (_reader_lock, ctypes.c_int, [], None),
-    'cft_uuid_class_error': (_reader_lock, ctypes.c_char_p, [], None),
-    'cft_uuid_class_begin': (_reader_lock, None, [], None),
-    'cft_uuid_class_end': (_reader_lock, _void_p, [], None),
-    'cft_uuid_class_verdicts': (_reader_lock, ctypes.c_ulong, [_void_p], None),
+    'cft_filter_class_install': (_reader_lock, ctypes.c_int, [], None),
+    'cft_filter_class_error': (_reader_lock, ctypes.c_char_p, [], None),
+    'cft_filter_class_begin': (_reader_lock, None, [ctypes.c_char_p], None),
+    'cft_filter_class_end': (_reader_lock, _void_p, [], None),
+    'cft_filter_class_verdicts': (_reader_lock, ctypes.c_ulong, [_void_p], None),
     # The Python C API, to reach the C functions that rosidl generates for every message type.
     'PyCapsule_GetName': (ctypes.pythonapi, ctypes.c_char_p, [ctypes.py_object], None),
     'PyCapsule_GetPointer':
@@ -247,67 +247,70 @@ def reader_lock_counts() -> tuple[int, int]:
 
 def set_content_filter(subscription_ptr: int, expression: str,
                        parameters: Sequence[str] = (), *,
-                       uuid_class: bool = False) -> Optional[int]:
+                       filter_class: Optional[str] = None) -> Optional[int]:
     """Set ``expression`` with ``parameters`` (already DDS literals) on an rcl subscription.
 
     The reader lock is installed first, so that the reader's own evaluations of the filter do not
     run while Fast DDS replaces it; if it cannot be, a warning says why, once per process.
 
-    :param uuid_class: create the subscription's filter with the library's own filter class
-        (:data:`UUID_FILTER_CLASS`, cft_action/_uuid_class.h) instead of DDS-SQL. It takes effect
-        on the first filter, which creates the filtered topic; later changes keep its class.
-    :return: with ``uuid_class``, the filter this call created in this process, for
-        :func:`uuid_filter_verdicts`; None otherwise, or when the preloaded guard created it.
+    :param filter_class: create the subscription's filter with one of the library's own filter
+        classes (:data:`UUID_FILTER_CLASS` or :data:`NODE_FILTER_CLASS`,
+        cft_action/_filter_class.h) instead of DDS-SQL. It takes effect on the first filter,
+        which creates the filtered topic; later changes keep its class.
+    :return: with ``filter_class``, the filter this call created in this process, for
+        :func:`filter_class_verdicts`; None otherwise, or when the preloaded guard created it.
     :raises ContentFilterError: with rcl's error string, or why the class cannot be used.
     """
     _check_subscription(subscription_ptr)
     _install_reader_lock_once()
-    if uuid_class:
-        reason = uuid_class_status()
+    if filter_class:
+        reason = filter_class_status()
         if reason:
             raise ContentFilterError(
-                f'the {UUID_FILTER_CLASS} filter class cannot be used: {reason}',
-                function='cft_uuid_class_install')
+                f'the {filter_class} filter class cannot be used: {reason}',
+                function='cft_filter_class_install')
     encoded = [p.encode() for p in parameters]
     argv = (ctypes.c_char_p * max(1, len(encoded)))(*encoded)
     options = _lib.rcl_get_zero_initialized_subscription_content_filter_options()
     _lib.rcl_subscription_content_filter_options_init(
         subscription_ptr, expression.encode(), len(encoded), argv, ctypes.byref(options))
     try:
-        if uuid_class:
-            _lib.cft_uuid_class_begin()
+        if filter_class:
+            _lib.cft_filter_class_begin(filter_class.encode())
         try:
             _lib.rcl_subscription_set_content_filter(subscription_ptr, ctypes.byref(options))
         finally:
-            created = _lib.cft_uuid_class_end() if uuid_class else None
+            created = _lib.cft_filter_class_end() if filter_class else None
     finally:
         _lib.rcl_subscription_content_filter_options_fini(subscription_ptr, ctypes.byref(options))
     return created or None
 
 
-#: The name of the library's own filter class (cft_action/_uuid_class.h).
+#: The library's own filter classes (cft_action/_filter_class.h): goal_id.uuid of action feedback,
+#: and the node of a parameter event.
 UUID_FILTER_CLASS = 'CFT_ACTION_UUID'
+NODE_FILTER_CLASS = 'CFT_ACTION_NODE'
 
 
-def uuid_class_status() -> str:
-    """Make the uuid filter class available to this process's readers; why not, or ``''``.
+def filter_class_status() -> str:
+    """Make the library's filter classes available to this process's readers; why not, or ``''``.
 
     Only for Fast DDS 2.14 (``libfastrtps.so.2.14``): elsewhere the reason names what is missing.
     """
     if 'fastrtps' not in get_rmw_implementation_identifier():
         return f'{get_rmw_implementation_identifier()} is not rmw_fastrtps'
-    if _lib.cft_uuid_class_install() >= 0:
+    if _lib.cft_filter_class_install() >= 0:
         return ''
-    return (_lib.cft_uuid_class_error() or b'').decode('utf-8', 'replace')
+    return (_lib.cft_filter_class_error() or b'').decode('utf-8', 'replace')
 
 
-def uuid_filter_verdicts(created_filter: int) -> int:
+def filter_class_verdicts(created_filter: int) -> int:
     """How many samples the filter returned by :func:`set_content_filter` judged in this process.
 
     A writer that filters for the reader marks its samples, and the reader then does not judge
     them: verdicts here mean that the writer sent samples without filtering them.
     """
-    return _lib.cft_uuid_class_verdicts(created_filter)
+    return _lib.cft_filter_class_verdicts(created_filter)
 
 
 _reader_lock_tried = False

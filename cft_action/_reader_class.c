@@ -1,12 +1,13 @@
 // Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 //
-// The CFT_ACTION_UUID class (_uuid_class.h) in a client's process, where cft_action is loaded with
-// ctypes after Fast DDS, so nothing can be preloaded. Two PLT slots of libfastrtps are redirected:
-// - DomainParticipantImpl::find_content_filter_factory answers the class with this library's
-//   factory (unless the slot is already redirected: the guard is preloaded and answers it);
+// The library's filter classes (_filter_class.h) in a client's process, where cft_action is
+// loaded with ctypes after Fast DDS, so nothing can be preloaded. Two PLT slots of libfastrtps are
+// redirected:
+// - DomainParticipantImpl::find_content_filter_factory answers the classes with this library's
+//   factories (unless the slot is already redirected: the guard is preloaded and answers them);
 // - DomainParticipantImpl::create_contentfilteredtopic, which rmw_fastrtps reaches through
-//   DomainParticipant's four-argument overload with the class DDSSQL, takes CFT_ACTION_UUID
-//   instead on a thread inside cft_uuid_class_begin/end.
+//   DomainParticipant's four-argument overload with the class DDSSQL, takes the class named by
+//   cft_filter_class_begin instead, on the thread inside cft_filter_class_begin/end.
 // The factory creates filters only on such a thread: those are the process's own readers. A writer
 // of this process that discovers a reader with this class gets no filter for it (the factory says
 // unsupported), so it sends that reader everything and filters nothing, unguarded.
@@ -15,7 +16,7 @@
 #include <string.h>
 
 #include "_patch.h"
-#include "_uuid_class.h"
+#include "_filter_class.h"
 
 #define EXPORT __attribute__((visibility("default")))
 
@@ -32,22 +33,22 @@ typedef void *(*create_cft_fn)(void *self, const void *name, void *related_topic
 
 static find_fn real_find;
 static create_cft_fn real_create_cft;
-static __thread int in_request;       // inside cft_uuid_class_begin/end
-static __thread void *created;        // the filter the factory created last on this thread
+static __thread const char *requested;  // the class, inside cft_filter_class_begin/end
+static __thread void *created;           // the filter a factory created last on this thread
 static struct cft_install installed = CFT_INSTALL_INIT;  // 0: ours; 2: the guard answers
 
-bool cft_uuid_class_may_create(void) { return in_request; }
-void cft_uuid_class_created(void *filter) { created = filter; }
+bool cft_filter_class_may_create(void) { return requested != NULL; }
+void cft_filter_class_created(void *filter) { created = filter; }
 
 static void *find(void *self, const char *class_name) {
-  void *factory = cft_uuid_factory_for(class_name);
+  void *factory = cft_filter_factory_for(class_name);
   return factory != NULL ? factory : real_find(self, class_name);
 }
 
 static void *create_cft(void *self, const void *name, void *related_topic, const void *expression,
                         const void *parameters, const char *class_name) {
   return real_create_cft(self, name, related_topic, expression, parameters,
-                         in_request ? CFT_UUID_CLASS : class_name);
+                         requested != NULL ? requested : class_name);
 }
 
 static int install(struct cft_install *once) {
@@ -66,25 +67,30 @@ static int install(struct cft_install *once) {
 }
 
 // 0 once this library answers the class, 2 if the preloaded guard does, < 0 if neither can be
-// arranged (cft_uuid_class_error says why). Later calls return the first result.
-EXPORT int cft_uuid_class_install(void) { return cft_install_once(&installed, install); }
+// arranged (cft_filter_class_error says why). Later calls return the first result.
+EXPORT int cft_filter_class_install(void) { return cft_install_once(&installed, install); }
 
-EXPORT const char *cft_uuid_class_error(void) { return installed.error; }
+EXPORT const char *cft_filter_class_error(void) { return installed.error; }
 
-// Around one rcl content-filter call for a reader that is to use the class.
-EXPORT void cft_uuid_class_begin(void) {
-  in_request = 1;
+// Around one rcl content-filter call for a reader that is to use `class_name` (CFT_UUID_CLASS or
+// CFT_NODE_CLASS; another name makes the call a plain DDS-SQL one).
+EXPORT void cft_filter_class_begin(const char *class_name) {
+  // Kept as this library's own string: the caller's may not outlive this call.
+  requested = class_name == NULL                      ? NULL
+              : strcmp(class_name, CFT_UUID_CLASS) == 0 ? CFT_UUID_CLASS
+              : strcmp(class_name, CFT_NODE_CLASS) == 0 ? CFT_NODE_CLASS
+                                                        : NULL;
   created = NULL;
 }
 
 // Ends the request; returns the filter this library created in it (new readers only), or NULL.
-EXPORT void *cft_uuid_class_end(void) {
-  in_request = 0;
+EXPORT void *cft_filter_class_end(void) {
+  requested = NULL;
   void *filter = created;
   created = NULL;
   return filter;
 }
 
-EXPORT unsigned long cft_uuid_class_verdicts(const void *filter) {
-  return filter != NULL ? cft_uuid_filter_verdicts(filter) : 0;
+EXPORT unsigned long cft_filter_class_verdicts(const void *filter) {
+  return filter != NULL ? cft_filter_verdicts(filter) : 0;
 }

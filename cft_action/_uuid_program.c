@@ -4,6 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "_cdr.h"
 #include "_uuid_program.h"
 
 // ---- the verdict ---------------------------------------------------------------------------------
@@ -179,13 +180,10 @@ CFT_EXPORT int cft_uuid_filter_try(const char *expression, const char *const *pa
 
 
 const uint8_t *cft_feedback_uuid(const void *payload) {
-  const uint8_t *p = payload;
   uint32_t length;
-  const uint8_t *data;
-  memcpy(&length, p + PAYLOAD_LENGTH, sizeof length);
-  memcpy(&data, p + PAYLOAD_DATA, sizeof data);
-  // Plain CDR, big or little endian; the uint8[16] that opens the body has no padding, and octets
-  // are the same in either byte order.
-  if (data == NULL || length < 20 || data[0] != 0 || data[1] > 1) return NULL;
-  return data + 4;
+  bool little;
+  const uint8_t *body = cft_cdr_body(payload, &length, &little);
+  // The uint8[16] that opens the body has no padding, and octets are the same in either byte
+  // order.
+  return body != NULL && length >= 16 ? body : NULL;
 }

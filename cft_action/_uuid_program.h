@@ -2,7 +2,7 @@
 //
 // A goal_id.uuid filter expression compiled to byte masks, and its verdict on 16 uuid bytes.
 // Shared by the guard's DDS-SQL accelerator (_guard_filter.c) and the library's own filter class
-// (_uuid_class.c), which both answer the same grammar:
+// (_filter_class.c), which both answer the same grammar:
 //     expr   := atom ( AND atom )*  |  atom ( OR atom )*        (one connective per level)
 //     atom   := term  |  '(' term ( AND term )* ')'
 //     term   := goal_id.uuid[I] = V  |  goal_id.uuid[I] = goal_id.uuid[I]
@@ -34,11 +34,6 @@ struct program {
 struct program *cft_uuid_compile(const char *expression, const char *const *params,
                                  int param_count);
 bool cft_uuid_matches(const struct program *p, const uint8_t *uuid);
-
-// SerializedPayload_t (public header fastdds/rtps/common/SerializedPayload.h): uint16_t
-// encapsulation, then uint32_t length, then octet *data.
-#define PAYLOAD_LENGTH 4
-#define PAYLOAD_DATA 8
 
 // The 16 bytes of goal_id.uuid in a serialized action FeedbackMessage (a SerializedPayload_t *),
 // or NULL when the sample is not plain CDR (encapsulation 0x0000 or 0x0001) of at least 20 bytes.

@@ -28,8 +28,10 @@ from rclpy.qos import qos_profile_services_default
 from rclpy.task import Future
 from unique_identifier_msgs.msg import UUID
 
+from cft_action import _rcl
 from cft_action._action_entities import ActionEntities
 from cft_action._feedback_filter import FeedbackFilter
+from cft_action._filtered_reader import filter_class_for, WRITER_FILTERING, WRITER_FILTERING_ENV
 from cft_action._finished_goals import FinishedGoals
 from cft_action._held_goals import cancel_goal_probe, HeldGoal, HeldGoals
 from cft_action._rclpy_compat import CompatActionClient, PromptLogger
@@ -43,14 +45,6 @@ __all__ = ['ActionClient', 'FeedbackFilterState', 'FEEDBACK_FILTER_ENV', 'WRITER
 
 #: Environment variable with which operators override the ``feedback_filter`` argument.
 FEEDBACK_FILTER_ENV = 'CFT_ACTION_FEEDBACK_FILTER'
-
-#: Environment variable with which operators override the ``writer_filtering`` argument.
-WRITER_FILTERING_ENV = 'CFT_ACTION_WRITER_FILTERING'
-
-#: Which servers' writers may filter: ``'guarded'`` (the default), only those run under
-#: ``cft-action guard``, which know the library's filter class; ``'any'``, every Fast DDS writer,
-#: with a DDS-SQL filter, which costs an unguarded server time and can crash it (docs/SAFETY.md).
-WRITER_FILTERING = ('guarded', 'any')
 
 _TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
                        GoalStatus.STATUS_ABORTED})
@@ -119,16 +113,6 @@ class FeedbackFilterState(NamedTuple):
     filtered_in: str = 'unknown'
 
 
-def _resolve_writer_filtering(writer_filtering: str) -> str:
-    value = os.environ.get(WRITER_FILTERING_ENV) or writer_filtering
-    if value not in WRITER_FILTERING:
-        source = (f'environment variable {WRITER_FILTERING_ENV}'
-                  if os.environ.get(WRITER_FILTERING_ENV) else 'writer_filtering')
-        raise InvalidArgumentError(
-            f'{source}={value!r}: expected one of {", ".join(WRITER_FILTERING)}')
-    return value
-
-
 def _resolve_mode(feedback_filter: Optional[str], optimization: Optional[bool]) -> str:
     from_env = os.environ.get(FEEDBACK_FILTER_ENV)
     if optimization is not None:
@@ -193,10 +177,10 @@ class ActionClient(CompatActionClient):
             ``feedback_filter``.
         """
         mode = _resolve_mode(feedback_filter, enable_feedback_msg_optimization)
-        self._writer_filtering = _resolve_writer_filtering(writer_filtering)
         self._cft_logger = PromptLogger(node.get_logger().get_child('cft_action'))
-        self._filter = FeedbackFilter(self._cft_logger, mode,
-                                      uuid_class=self._writer_filtering == 'guarded')
+        self._filter = FeedbackFilter(
+            self._cft_logger, mode,
+            filter_class=filter_class_for(writer_filtering, _rcl.UUID_FILTER_CLASS))
         self._reader = self._filter.reader
         self._cft_action_name = action_name
         self._cancel_qos = kwargs.get('cancel_service_qos_profile', qos_profile_services_default)

@@ -149,20 +149,21 @@ def filter_counts() -> dict[str, int]:
     return _counters('cft_guard_filter_count', FILTER_COUNTERS)
 
 
-#: The counters of cft_guard_uuid_class_count() in _guard.c, in its order.
-UUID_CLASS_COUNTERS = ('lookups', 'filters', 'verdicts', 'changes')
+#: The counters of cft_guard_filter_class_count() in _guard.c, in its order.
+FILTER_CLASS_COUNTERS = ('lookups', 'filters', 'verdicts', 'changes')
 
 
-def uuid_class_counts() -> dict[str, int]:
-    """Return what this process's writers did with the library's own filter class.
+def filter_class_counts() -> dict[str, int]:
+    """Return what this process's writers did with the library's own filter classes.
 
-    A client's feedback filter uses that class (``CFT_ACTION_UUID``, cft_action/_uuid_class.h),
-    which only a guarded server knows: ``lookups`` counts the times Fast DDS asked the guard for
+    A client's feedback filter uses one of them (``CFT_ACTION_UUID``), a ParameterEventHandler's
+    node filter the other (``CFT_ACTION_NODE``; cft_action/_filter_class.h); only a guarded
+    process knows them: ``lookups`` counts the times Fast DDS asked the guard for
     its factory, ``filters`` the filters created (one per filtered reader and writer, and per
     reader of this process), ``verdicts`` the samples they judged, ``changes`` the filters
     created or changed in place: one per filter event. ``{}`` without the guard.
     """
-    return _counters('cft_guard_uuid_class_count', UUID_CLASS_COUNTERS)
+    return _counters('cft_guard_filter_class_count', FILTER_CLASS_COUNTERS)
 
 
 #: The counters of cft_guard_writer_qos_count() in _guard_writer_qos.c, in its order.

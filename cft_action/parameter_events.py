@@ -67,6 +67,8 @@ from rclpy.parameter_event_handler import (
 from rclpy.qos import qos_profile_parameter_events, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
+from cft_action import _rcl
+from cft_action._filtered_reader import filter_class_for
 from cft_action._parameter_event_filter import (
     ALL_NODES,
     NO_NODES,
@@ -103,6 +105,8 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         event_callbacks: Optional[SubscriptionEventCallbacks] = None,
         qos_overriding_options: Optional[QoSOverridingOptions] = None,
         raw: bool = False,
+        *,
+        writer_filtering: str = 'guarded',
     ) -> None:
         """
         Create ParameterEventHandler.
@@ -153,6 +157,11 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         :param qos_overriding_options: Options to customize QoS parameter overrides.
         :param raw: If ``True``, then received messages will be stored in raw binary
             representation.
+        :param writer_filtering: As for :class:`cft_action.ActionClient`: ``'guarded'`` (default)
+            filters with the library's node class, which only nodes run under ``cft-action
+            guard`` evaluate; the others send every event, and this handler's DDS reader drops
+            the unwatched ones. ``'any'``: DDS-SQL, which every node's writer evaluates, and which
+            :meth:`set_parameter_event_filter` needs for more than node names.
         """
         # rclpy's constructor would create an unfiltered subscription, and giving that a first
         # filter later recreates its DataReader; so its three attributes are set here instead.
@@ -161,7 +170,9 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         self._rclpy_callbacks = set_parameter_event_callbacks(self)  # what its methods use
 
         self._cft_logger = PromptLogger(node.get_logger().get_child('cft_action'))
-        self._filter = ParameterEventFilter(node, self._cft_logger)
+        self._filter = ParameterEventFilter(
+            node, self._cft_logger,
+            filter_class=filter_class_for(writer_filtering, _rcl.NODE_FILTER_CLASS))
         self.parameter_event_subscription = self._filter.subscribe(
             node, self._rclpy_callbacks.event_callback, is_content_filter_supported(node),
             qos_profile=self.qos_profile, callback_group=callback_group,

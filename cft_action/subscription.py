@@ -26,7 +26,7 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.subscription import Subscription
 from rclpy.type_support import check_is_valid_msg_type
 
-from cft_action._filtered_reader import get_filter, has_filter, set_filter
+from cft_action._filtered_reader import apply_filter, get_filter, has_filter, set_filter
 from cft_action.message_types import first_primitive_field
 from cft_action._rclpy_compat import (declare_qos_parameters, new_rcl_subscription,
                                       register_subscription, validate_qos_or_depth,
@@ -138,6 +138,33 @@ def create_filtered_subscription(
     if not filter_expression:
         raise ContentFilterError('a filtered subscription needs a non-empty filter_expression; '
                                  'use Node.create_subscription for an unfiltered one')
+    return subscribe_filtered(
+        node, msg_type, topic, callback, qos_profile, filter_expression, expression_parameters,
+        callback_group=callback_group, event_callbacks=event_callbacks,
+        qos_overriding_options=qos_overriding_options, raw=raw)[0]
+
+
+def subscribe_filtered(
+    node: Node,
+    msg_type,
+    topic: str,
+    callback: Callable,
+    qos_profile: Union[QoSProfile, int],
+    filter_expression: str,
+    expression_parameters: Sequence[Literal],
+    *,
+    filter_class: Optional[str] = None,
+    callback_group: Optional[CallbackGroup] = None,
+    event_callbacks: Optional[SubscriptionEventCallbacks] = None,
+    qos_overriding_options: Optional[QoSOverridingOptions] = None,
+    raw: bool = False,
+) -> tuple[Subscription, Optional[int]]:
+    """:func:`create_filtered_subscription` with a non-empty filter, optionally in one of the
+    library's filter classes (:func:`cft_action._rcl.set_content_filter`).
+
+    :return: the subscription, and the class's filter object that this process created for it
+        (None for DDS-SQL, or when the preloaded guard created it).
+    """
     # What follows mirrors Node.create_subscription, with the filter set between the creation of
     # the rcl subscription and its registration with the node.
     qos_profile = validate_qos_or_depth(node, qos_profile)
@@ -153,13 +180,14 @@ def create_filtered_subscription(
     declare_qos_parameters(node, final_topic, qos_profile,
                            qos_overriding_options or QoSOverridingOptions([]))
     check_is_valid_msg_type(msg_type)
-    _validate_on_probe(node, msg_type, qos_profile, final_topic, filter_expression,
-                       expression_parameters)
+    if filter_class is None:  # a class's expressions are checked by its own grammar
+        _validate_on_probe(node, msg_type, qos_profile, final_topic, filter_expression,
+                           expression_parameters)
     subscription_object = new_rcl_subscription(node, msg_type, topic, qos_profile)
     try:
         with subscription_object:
-            set_filter(subscription_object.pointer, final_topic, filter_expression,
-                       expression_parameters)
+            created = apply_filter(subscription_object.pointer, final_topic, filter_expression,
+                                   expression_parameters, filter_class=filter_class)[1]
         subscription = Subscription(
             subscription_object, msg_type, topic, callback, callback_group, qos_profile, raw,
             event_callbacks=event_callbacks or SubscriptionEventCallbacks())
@@ -173,7 +201,7 @@ def create_filtered_subscription(
     # rclpy 7.1 annotates event_handlers as one EventHandler; it is a list of them.
     for event_handler in subscription.event_handlers:  # type: ignore[attr-defined]
         node.add_waitable(event_handler)
-    return subscription
+    return subscription, created
 
 
 def _warn_message_lost(node: Node) -> None:

@@ -99,16 +99,17 @@ def role_update(action: str, count: int, interval: float, server_pid: int) -> in
         say('ERROR no feedback subscription:', reason)
         return 2
     # The class a default client uses (the library's own, unless CFT_ACTION_WRITER_FILTERING=any).
-    uuid_class = os.environ.get('CFT_ACTION_WRITER_FILTERING', 'guarded') == 'guarded'
+    filter_class = (_rcl.UUID_FILTER_CLASS
+                    if os.environ.get('CFT_ACTION_WRITER_FILTERING', 'guarded') == 'guarded' else None)
     # The first filter recreates the reader: before use.
-    _rcl.set_content_filter(ptr, NEVER[0], uuid_class=uuid_class)
+    _rcl.set_content_filter(ptr, NEVER[0], filter_class=filter_class)
     if not client.wait_for_server(timeout_sec=20.0):
         say('NO_SERVER')
         return 1
     time.sleep(1.0)  # let discovery carry the filtered reader to the server
 
     def update(i: int) -> None:
-        _rcl.set_content_filter(ptr, NEVER[i % 2], uuid_class=uuid_class)
+        _rcl.set_content_filter(ptr, NEVER[i % 2], filter_class=filter_class)
         time.sleep(interval)
 
     return _event_loop(count, server_pid, update)

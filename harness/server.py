@@ -40,8 +40,8 @@ go, or null), ``release_reason``, ``maxrss_kb`` (this process's peak resident se
 goal responses sent, and sends that failed: rclpy logs those and drops the goal),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
-line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and ``guard_uuid_class`` (its call, filter-verdict,
-writer-limit and filter-class counters) and ``writers`` (the GUIDs of the feedback and status writers, in hex).
+line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and ``guard_filter_class`` (its call,
+filter-verdict, writer-limit and filter-class counters) and ``writers`` (the GUIDs of the feedback and status writers, in hex).
 ``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
 by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). The command
 ``release`` ends ``--hold-goals``. End of input stops the server.
@@ -315,7 +315,7 @@ class TickingServer:
                     'interval_s': self.interval_s, 'cpu_s': usage.ru_utime + usage.ru_stime,
                     'guard': guard.status(), 'guard_calls': guard.call_counts(),
                     'guard_filter': guard.filter_counts(), 'guard_writers': guard.writer_limits(),
-                    'guard_uuid_class': guard.uuid_class_counts()}
+                    'guard_filter_class': guard.filter_class_counts()}
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:

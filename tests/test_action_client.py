@@ -394,7 +394,9 @@ def test_multithreaded_executor_with_goals_sent_from_another_thread(server):
         deadline = time.monotonic() + 5
         while time.monotonic() < deadline and any(len(v) < 5 for v in received.values()):
             time.sleep(0.05)
-        assert {i: sorted(v) for i, v in received.items()} == {i: list(range(5)) for i in range(12)}
+        # A goal sent after its hold timed out (arrival_timeouts) may lose feedback by design.
+        assert {i: sorted(v) for i, v in received.items()} == \
+            {i: list(range(5)) for i in range(12)}, client.feedback_filter_state
         assert client.feedback_filter_state.active
     finally:
         ros.close()

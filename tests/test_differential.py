@@ -24,7 +24,7 @@ CONFIGS = ('rclpy', 'client', 'goals')
 @pytest.fixture(scope='module')
 def report(tmp_path_factory):
     out = tmp_path_factory.mktemp('differential') / 'report.json'
-    command = [sys.executable, '-m', 'benchmarks.differential', '--duration', '5', '--slots', '3',
+    command = [sys.executable, '-m', 'benchmarks.differential', '--duration', '3', '--slots', '3',
                '--seed', '12', '--linger', '2', '--domain', os.environ['ROS_DOMAIN_ID'],
                '--out', str(out), '--markdown']
     run = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=150)

@@ -20,7 +20,7 @@ from tests.test_action_client import result_of, round_trip, send
 
 
 def compiled(child) -> int:
-    return child.request_json('stats', 'STATS')['guard_uuid_class']['changes']
+    return child.request_json('stats', 'STATS')['guard_filter_class']['changes']
 
 
 def test_client_mode_changes_its_filter_only_for_an_untagged_caller_uuid(ros):

@@ -22,7 +22,7 @@ ORDER = 5
 
 def evaluations(stats: dict) -> int:
     # The clients' filters are of the library's class: the guard's writers judge them with it.
-    return stats['guard_uuid_class']['verdicts']
+    return stats['guard_filter_class']['verdicts']
 
 
 @pytest.mark.parametrize('limit, filtered_for', [(None, READERS), ('32', 32)],

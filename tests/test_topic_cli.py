@@ -651,7 +651,7 @@ QUIRKS = {
         ('int16_values[0] NOT BETWEEN %0 AND %1', ['-1', '1']),
     ],
 }
-MESSAGES = 500  # of each type: 1,000 in all
+MESSAGES = 250  # of each type: 500 in all
 EXPRESSIONS = 14  # random ones, for each type, besides the quirks
 
 

@@ -1,4 +1,4 @@
-"""The library's own filter class, CFT_ACTION_UUID (cft_action/_uuid_class.c).
+"""The library's own filter class, CFT_ACTION_UUID (cft_action/_filter_class.c).
 
 A client's feedback filter uses it, so that only a guarded server's writer filters: an unguarded
 server does not know the class, sends every sample, and the client's reader drops foreign ones.
@@ -95,7 +95,7 @@ int main() {
 
 
 def test_the_c_objects_match_the_fastdds_interfaces(tmp_path):
-    """_uuid_class.c builds the two interfaces' vtables by hand: slots 0 and 1 of the factory,
+    """_filter_class.c builds the two interfaces' vtables by hand: slots 0 and 1 of the factory,
     slot 0 of the filter, no virtual destructor, ReturnCode_t in a register, payload fields."""
     assert fastdds_header_probe(PROBE, tmp_path) == [1, 9, 1, 8, 8, 4, 1, 4, 8]
 
@@ -129,7 +129,7 @@ def test_where_other_goals_feedback_is_dropped(ros, guarded):
         assert state.feedback_dropped == 0, state
         if guarded:
             assert state.filtered_in == 'writer' and ours._reader.reader_verdicts == 0, state
-            counts = child.request_json('stats', 'STATS')['guard_uuid_class']
+            counts = child.request_json('stats', 'STATS')['guard_filter_class']
             assert counts['filters'] >= 1 and counts['verdicts'] >= 2 * ORDER, counts
         else:
             # Both goals' feedback came over the wire, and the reader judged every sample.
@@ -144,13 +144,13 @@ def test_writer_filtering_any_keeps_dds_sql(ros):
     child = start_server(action, guarded=True)
     try:
         client = make_client(ros, action, writer_filtering='any')
-        assert not client._reader.uuid_class
+        assert not client._reader.filter_class
         assert client.feedback_filter_state.filtered_in == 'writer'
-        counts = child.request_json('stats', 'STATS')['guard_uuid_class']
+        counts = child.request_json('stats', 'STATS')['guard_filter_class']
         assert counts['filters'] == 0, counts
     finally:
         child.stop()
 
 
 def test_the_class_is_installed_in_this_process():
-    assert _rcl.uuid_class_status() == ''
+    assert _rcl.filter_class_status() == ''

@@ -1,0 +1,32 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The body of a serialized sample, as Fast DDS hands it to a content filter: a SerializedPayload_t
+// (public header fastdds/rtps/common/SerializedPayload.h): uint16_t encapsulation, then uint32_t
+// length, then octet *data. tests/test_uuid_class.py checks the two offsets against the
+// headers.
+#ifndef CFT_ACTION_CDR_H_
+#define CFT_ACTION_CDR_H_
+
+#include <stdbool.h>
+#include <stdint.h>
+#include <string.h>
+
+#define PAYLOAD_LENGTH 4
+#define PAYLOAD_DATA 8
+
+// The body after the 4-byte encapsulation header, if the sample is plain CDR (big endian 0x0000
+// or little endian 0x0001); else NULL. *body_length: its bytes; *little: its byte order.
+static inline const uint8_t *cft_cdr_body(const void *payload, uint32_t *body_length,
+                                          bool *little) {
+  const uint8_t *p = payload;
+  uint32_t length;
+  const uint8_t *data;
+  memcpy(&length, p + PAYLOAD_LENGTH, sizeof length);
+  memcpy(&data, p + PAYLOAD_DATA, sizeof data);
+  if (data == NULL || length < 4 || data[0] != 0 || data[1] > 1) return NULL;
+  *body_length = length - 4;
+  *little = data[1] == 1;
+  return data + 4;
+}
+
+#endif  // CFT_ACTION_CDR_H_

@@ -1,0 +1,155 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The library's filter classes (see _filter_class.h): Fast DDS 2.14's IContentFilterFactory and
+// IContentFilter, as C objects whose first word is a vtable. Both interfaces declare only pure
+// virtual members (no virtual destructor), so under the Itanium C++ ABI their vtables are exactly:
+//   IContentFilterFactory: { create_content_filter, delete_content_filter }
+//   IContentFilter:        { evaluate }
+// tests/test_uuid_class.py checks this against the installed headers. ReturnCode_t is a trivially
+// copyable class of one uint32_t, returned in eax; references are pointers.
+//
+// One factory per class; a class is a grammar: how an expression compiles to a program (one
+// malloc'd block, or NULL outside the grammar), and a program's verdict on a serialized sample.
+#define _GNU_SOURCE
+#include <pthread.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "_filter_class.h"
+#include "_node_program.h"
+#include "_uuid_program.h"
+
+#define RETCODE_OK 0u
+#define RETCODE_UNSUPPORTED 2u
+#define RETCODE_BAD_PARAMETER 3u
+#define RETCODE_OUT_OF_RESOURCES 5u
+
+struct grammar {
+  void *(*compile)(const char *expression);
+  bool (*matches)(const void *program, const void *payload);  // payload: a SerializedPayload_t *
+};
+
+// A sample that is not a plain CDR FeedbackMessage is passed on: the client's own UUID check,
+// rclpy's, then drops it if it is foreign, as it would for a plain client.
+static bool uuid_matches(const void *program, const void *payload) {
+  const uint8_t *uuid = cft_feedback_uuid(payload);
+  return uuid == NULL || cft_uuid_matches(program, uuid);
+}
+
+// The class takes no parameters, so a %N in the expression does not compile.
+static void *uuid_compile(const char *expression) { return cft_uuid_compile(expression, NULL, 0); }
+
+// An event whose node cannot be read is passed on: the handler's callbacks still compare names.
+static bool node_matches(const void *program, const void *payload) {
+  uint32_t length;
+  const char *node = cft_event_node(payload, &length);
+  return node == NULL || cft_node_matches(program, node, length);
+}
+
+static void *node_compile(const char *expression) { return cft_node_compile(expression); }
+
+static const struct grammar uuid_grammar = {uuid_compile, uuid_matches};
+static const struct grammar node_grammar = {node_compile, node_matches};
+
+// Of every filter of this library: verdicts, and filters created or changed (each is a filter
+// event at a writer or a reader of this process).
+static unsigned long total_verdicts, total_changes;
+
+struct filter {
+  const void *const *vtable;
+  const struct grammar *grammar;
+  pthread_rwlock_t lock;  // the program may be replaced while a receive thread evaluates
+  void *program;
+  unsigned long verdicts;
+};
+
+static bool filter_evaluate(const struct filter *self, const void *payload,
+                            const void *sample_info, const void *reader_guid) {
+  (void)sample_info;
+  (void)reader_guid;
+  struct filter *filter = (struct filter *)self;
+  __atomic_fetch_add(&filter->verdicts, 1, __ATOMIC_RELAXED);
+  __atomic_fetch_add(&total_verdicts, 1, __ATOMIC_RELAXED);
+  pthread_rwlock_rdlock(&filter->lock);
+  bool match = filter->grammar->matches(filter->program, payload);
+  pthread_rwlock_unlock(&filter->lock);
+  return match;
+}
+
+static const void *const filter_vtable[] = {(const void *)filter_evaluate};
+
+struct factory {
+  const void *const *vtable;
+  const struct grammar *grammar;
+};
+
+// filter_parameters is not read: these classes take no parameters.
+static uint32_t factory_create(const struct factory *self, const char *class_name,
+                               const char *type_name, const void *data_type,
+                               const char *expression, const void *filter_parameters,
+                               void **filter_instance) {
+  (void)class_name, (void)type_name, (void)data_type, (void)filter_parameters;
+  struct filter *existing = *filter_instance;
+  if (expression == NULL) return existing != NULL ? RETCODE_OK : RETCODE_BAD_PARAMETER;
+  if (existing == NULL && !cft_filter_class_may_create()) return RETCODE_UNSUPPORTED;
+  void *program = self->grammar->compile(expression);
+  if (program == NULL) return RETCODE_BAD_PARAMETER;
+  if (existing != NULL) {  // an update in place: Fast DDS hands back only this factory's filters
+    pthread_rwlock_wrlock(&existing->lock);
+    void *old = existing->program;
+    existing->program = program;
+    pthread_rwlock_unlock(&existing->lock);
+    free(old);
+    __atomic_fetch_add(&total_changes, 1, __ATOMIC_RELAXED);
+    return RETCODE_OK;
+  }
+  struct filter *filter = calloc(1, sizeof *filter);
+  if (filter == NULL) {
+    free(program);
+    return RETCODE_OUT_OF_RESOURCES;
+  }
+  filter->vtable = filter_vtable;
+  filter->grammar = self->grammar;
+  pthread_rwlock_init(&filter->lock, NULL);
+  filter->program = program;
+  *filter_instance = filter;
+  __atomic_fetch_add(&total_changes, 1, __ATOMIC_RELAXED);
+  cft_filter_class_created(filter);
+  return RETCODE_OK;
+}
+
+static uint32_t factory_delete(const struct factory *self, const char *class_name,
+                               void *filter_instance) {
+  (void)self, (void)class_name;
+  struct filter *filter = filter_instance;
+  if (filter == NULL) return RETCODE_BAD_PARAMETER;
+  pthread_rwlock_destroy(&filter->lock);
+  free(filter->program);
+  free(filter);
+  return RETCODE_OK;
+}
+
+static const void *const factory_vtable[] = {(const void *)factory_create,
+                                            (const void *)factory_delete};
+static const struct factory uuid_factory = {factory_vtable, &uuid_grammar};
+static const struct factory node_factory = {factory_vtable, &node_grammar};
+
+void *cft_filter_factory_for(const char *class_name) {
+  if (class_name == NULL) return NULL;
+  if (strcmp(class_name, CFT_UUID_CLASS) == 0) return (void *)&uuid_factory;
+  if (strcmp(class_name, CFT_NODE_CLASS) == 0) return (void *)&node_factory;
+  return NULL;
+}
+
+unsigned long cft_filter_verdicts(const void *filter) {
+  return __atomic_load_n(&((const struct filter *)filter)->verdicts, __ATOMIC_RELAXED);
+}
+
+unsigned long cft_filter_class_total_verdicts(void) {
+  return __atomic_load_n(&total_verdicts, __ATOMIC_RELAXED);
+}
+
+unsigned long cft_filter_class_total_changes(void) {
+  return __atomic_load_n(&total_changes, __ATOMIC_RELAXED);
+}

@@ -1,0 +1,48 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The library's own content filter classes, each answered from a few bytes of each sample:
+// - CFT_ACTION_UUID, for action feedback: the goal_id.uuid grammar of _uuid_program.h, on the 16
+//   uuid bytes;
+// - CFT_ACTION_NODE, for /parameter_events: the node-name grammar of _node_program.h, on the
+//   event's node string.
+//
+// Fast DDS 2.14 builds a writer-side filter for a reader only when the writer's participant has a
+// factory for the reader's filter class (ReaderFilterCollection::update_entry asks
+// DomainParticipantImpl::find_content_filter_factory, and keeps no entry when it returns null). A
+// writer that does not know these classes therefore sends such a reader every sample, keeps no
+// filter for it, puts no filter signature into its samples and has nothing for Fast-DDS#4878 to
+// race on: it works exactly as with a plain rclpy reader. The reader then drops the samples it does
+// not want itself, in its own process. A writer in a process run under the guard knows the
+// classes, and filters on its side.
+//
+// The factories are found by interposing find_content_filter_factory: by preload in the guard, by
+// a PLT slot in the client's process (_reader_class.c).
+#ifndef CFT_ACTION_FILTER_CLASS_H_
+#define CFT_ACTION_FILTER_CLASS_H_
+
+#include <stdbool.h>
+
+#define CFT_UUID_CLASS "CFT_ACTION_UUID"
+#define CFT_NODE_CLASS "CFT_ACTION_NODE"
+
+// The factory (an object with an IContentFilterFactory vtable) if `class_name` is one of these
+// classes, else NULL.
+void *cft_filter_factory_for(const char *class_name);
+
+// Defined by the library that links this file: whether a factory may create a filter now. The
+// guard creates them for its writers and readers; a client's process only for its own readers
+// (a writer there would filter unguarded).
+bool cft_filter_class_may_create(void);
+
+// Called after a filter was created (not updated) by a factory; `filter` is opaque.
+void cft_filter_class_created(void *filter);
+
+// How many verdicts `filter` has given since it was created.
+unsigned long cft_filter_verdicts(const void *filter);
+
+// How many verdicts every filter of this library has given.
+unsigned long cft_filter_class_total_verdicts(void);
+// How many filters of this library were created or changed.
+unsigned long cft_filter_class_total_changes(void);
+
+#endif  // CFT_ACTION_FILTER_CLASS_H_
