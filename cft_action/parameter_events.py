@@ -42,12 +42,14 @@ can hide a ``use_sim_time`` change from the node's clock.
 
 The hazard. Each filter change, and the creation and destruction of the filtered reader, is an
 event at every ``/parameter_events`` writer in the domain, that is, at every node with parameter
-events enabled, not only at the watched ones. With Fast DDS 2.14 such an event can crash a process
-that publishes at that moment (eProsima/Fast-DDS#4878, docs/INTERNALS.md section 10). Measured with
-``demos/parameter_events.py --soak``: 20 nodes in one process, each changing a parameter at 10 Hz,
-crashed within 2, 10 and 102 updates (one every 50 ms); under :mod:`cft_action.guard` they survived
-500. This handler therefore changes its filter only when the set of watched nodes changes; where
-nodes publish parameter events often, run them under the guard.
+events enabled, not only at the watched ones. With a DDS-SQL filter, Fast DDS 2.14 can crash a
+process that publishes at that moment (eProsima/Fast-DDS#4878, docs/INTERNALS.md section 10;
+measured in docs/BENCHMARKS.md, "Parameter events"). So the handler's filter uses the library's
+own class, ``CFT_ACTION_NODE`` (docs/INTERNALS.md section 16): a node that nobody put under the
+guard does not know it, keeps no filter for this handler and sends it every event, which the
+handler's DDS reader drops; a node under :mod:`cft_action.guard` filters on its side. An
+expression of one's own (:meth:`ParameterEventHandler.set_parameter_event_filter`) is DDS-SQL,
+with ``writer_filtering='any'``: change it rarely, or run the nodes under the guard.
 """
 
 from __future__ import annotations
