@@ -1,8 +1,8 @@
 """The benchmark sweep (``make bench``): four configurations over a grid of loads.
 
-For every load point (N client processes x M goals each, feedback rate, feedback size) one guarded
-server runs four configurations one after another, through the same harness as ``make demo``
-(:mod:`harness.load`):
+For every load point (N client processes x M goals each, feedback rate, feedback size) one server
+(guarded, or not with ``--guard off``) runs four configurations one after another, through the
+same harness as ``make demo`` (:mod:`harness.load`):
 
 - ``rclpy``: plain ``rclpy.action.ActionClient``;
 - ``client`` and ``goals``: ``cft_action.ActionClient`` in those modes;
@@ -71,6 +71,9 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                         default='rclpy,client,goals,upstream',
                         help='comma-separated, from: ' + ', '.join(load.CONFIG_LABELS))
     parser.add_argument('--network', choices=('auto', 'netns', 'count'), default='auto')
+    parser.add_argument('--guard', choices=('on', 'off'), default='on',
+                        help="'off': the server runs without `cft-action guard`, as the server of "
+                             'someone who only swapped a client import')
     parser.add_argument('--drain-timeout', type=float, default=300.0,
                         help='seconds a phase may take after its goals finished')
     parser.add_argument('--goals-timeout', type=float, default=None,
@@ -117,7 +120,7 @@ def run(args: argparse.Namespace) -> Path:
         'machine': load.environment_facts(),
         'grid': {'clients': args.clients, 'goals': args.goals, 'rates_hz': args.rates,
                  'sizes': args.sizes, 'duration_s': args.duration, 'configs': args.configs,
-                 'anatomy': args.anatomy},
+                 'anatomy': args.anatomy, 'guard': args.guard},
         'points': [],
     }
     points = grid(args)
@@ -131,7 +134,7 @@ def run(args: argparse.Namespace) -> Path:
             clients=point['clients'], goals=point['goals'], rate_hz=point['rate_hz'],
             order=max(1, round(args.duration * point['rate_hz'])), pad=SIZES[point['size']],
             network=args.network, drain_timeout=args.drain_timeout,
-            goals_timeout=args.goals_timeout)
+            goals_timeout=args.goals_timeout, guarded=args.guard == 'on')
         progress(f'point {i}/{len(points)}: N={spec.clients} M={spec.goals} '
                  f'{spec.rate_hz:g} Hz {point["size"]}')
         point_started = time.monotonic()
