@@ -729,4 +729,4 @@ def test_client_fallback_agrees_with_dds_filter(ros):
         decisive += 0 < len(expected) < MESSAGES
     assert not disagreements, f'seed {seed}:\n' + '\n'.join(disagreements)
     assert decisive >= 0.5 * len(verdicts), 'too many trivial filters'
-    assert len(verdicts) * MESSAGES >= 20_000  # verdicts compared: 42 filters, 500 messages each
+    assert len(verdicts) * MESSAGES >= 10_000  # verdicts compared: 42 filters, 250 messages each
