@@ -36,11 +36,12 @@ static __thread int in_request;       // inside cft_uuid_class_begin/end
 static __thread void *created;        // the filter the factory created last on this thread
 static struct cft_install installed = CFT_INSTALL_INIT;  // 0: ours; 2: the guard answers
 
-bool cft_uuid_class_may_create(void) { return in_request; }
-void cft_uuid_class_created(void *filter) { created = filter; }
+static bool may_create(void) { return in_request; }
+static void remember(void *filter) { created = filter; }
+static const struct cft_uuid_class_owner reader_owner = {may_create, remember};
 
 static void *find(void *self, const char *class_name) {
-  void *factory = cft_uuid_factory_for(class_name);
+  void *factory = cft_uuid_factory_for(class_name, &reader_owner);
   return factory != NULL ? factory : real_find(self, class_name);
 }
 

@@ -24,6 +24,7 @@
 // Of every filter of this library: verdicts, and filters created or changed (each is a filter
 // event at a writer or a reader of this process).
 static unsigned long total_verdicts, total_changes;
+static const struct cft_uuid_class_owner *owner;  // set by cft_uuid_factory_for before any create
 
 struct uuid_filter {
   const void *const *vtable;
@@ -59,7 +60,8 @@ static uint32_t factory_create(void *self, const char *class_name, const char *t
   (void)self, (void)class_name, (void)type_name, (void)data_type, (void)filter_parameters;
   struct uuid_filter *existing = *filter_instance;
   if (expression == NULL) return existing != NULL ? RETCODE_OK : RETCODE_BAD_PARAMETER;
-  if (existing == NULL && !cft_uuid_class_may_create()) return RETCODE_UNSUPPORTED;
+  const struct cft_uuid_class_owner *decides = __atomic_load_n(&owner, __ATOMIC_ACQUIRE);
+  if (existing == NULL && (decides == NULL || !decides->may_create())) return RETCODE_UNSUPPORTED;
   struct program *program = cft_uuid_compile(expression, NULL, 0);
   if (program == NULL) return RETCODE_BAD_PARAMETER;
   if (existing != NULL) {  // an update in place: Fast DDS hands back only this factory's filters
@@ -81,7 +83,7 @@ static uint32_t factory_create(void *self, const char *class_name, const char *t
   filter->program = program;
   *filter_instance = filter;
   __atomic_fetch_add(&total_changes, 1, __ATOMIC_RELAXED);
-  cft_uuid_class_created(filter);
+  decides->created(filter);
   return RETCODE_OK;
 }
 
@@ -101,8 +103,10 @@ static struct {
   const void *const *vtable;
 } factory = {factory_vtable};
 
-void *cft_uuid_factory_for(const char *class_name) {
-  return class_name != NULL && strcmp(class_name, CFT_UUID_CLASS) == 0 ? (void *)&factory : NULL;
+void *cft_uuid_factory_for(const char *class_name, const struct cft_uuid_class_owner *by) {
+  if (class_name == NULL || strcmp(class_name, CFT_UUID_CLASS) != 0) return NULL;
+  __atomic_store_n(&owner, by, __ATOMIC_RELEASE);
+  return (void *)&factory;
 }
 
 unsigned long cft_uuid_filter_verdicts(const void *filter) {

@@ -21,17 +21,19 @@
 
 #define CFT_UUID_CLASS "CFT_ACTION_UUID"
 
+// What the library that links this file decides about the filters of its process: whether the
+// factory may create a filter now (the guard creates them for its writers and readers; a client's
+// process only for its own readers, since a writer there would filter unguarded), and what it
+// does with one the factory created (not updated); `filter` is opaque. Given by that library, so
+// that calls go one way: from it into this file.
+struct cft_uuid_class_owner {
+  bool (*may_create)(void);
+  void (*created)(void *filter);
+};
+
 // The factory (an object with an IContentFilterFactory vtable) if `class_name` is this class, else
-// NULL.
-void *cft_uuid_factory_for(const char *class_name);
-
-// Defined by the library that links this file: whether the factory may create a filter now. The
-// guard creates them for its writers and readers; a client's process only for its own readers
-// (a writer there would filter unguarded).
-bool cft_uuid_class_may_create(void);
-
-// Called after a filter was created (not updated) by the factory; `filter` is opaque.
-void cft_uuid_class_created(void *filter);
+// NULL. Its filters follow `owner`'s decisions from then on (the same owner on every call).
+void *cft_uuid_factory_for(const char *class_name, const struct cft_uuid_class_owner *owner);
 
 // How many verdicts `filter` has given since it was created.
 unsigned long cft_uuid_filter_verdicts(const void *filter);

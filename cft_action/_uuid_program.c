@@ -4,6 +4,7 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "_fastdds_layout.h"  // PAYLOAD_LENGTH, PAYLOAD_DATA (SerializedPayload_t)
 #include "_uuid_program.h"
 
 // ---- the verdict ---------------------------------------------------------------------------------
@@ -179,6 +180,7 @@ CFT_EXPORT int cft_uuid_filter_try(const char *expression, const char *const *pa
 
 
 const uint8_t *cft_feedback_uuid(const void *payload) {
+#if CFT_LAYOUT_KNOWN
   const uint8_t *p = payload;
   uint32_t length;
   const uint8_t *data;
@@ -188,4 +190,8 @@ const uint8_t *cft_feedback_uuid(const void *payload) {
   // are the same in either byte order.
   if (data == NULL || length < 20 || data[0] != 0 || data[1] > 1) return NULL;
   return data + 4;
+#else
+  (void)payload;
+  return NULL;
+#endif
 }

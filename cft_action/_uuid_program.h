@@ -35,13 +35,10 @@ struct program *cft_uuid_compile(const char *expression, const char *const *para
                                  int param_count);
 bool cft_uuid_matches(const struct program *p, const uint8_t *uuid);
 
-// SerializedPayload_t (public header fastdds/rtps/common/SerializedPayload.h): uint16_t
-// encapsulation, then uint32_t length, then octet *data.
-#define PAYLOAD_LENGTH 4
-#define PAYLOAD_DATA 8
-
 // The 16 bytes of goal_id.uuid in a serialized action FeedbackMessage (a SerializedPayload_t *),
-// or NULL when the sample is not plain CDR (encapsulation 0x0000 or 0x0001) of at least 20 bytes.
+// or NULL when the sample is not plain CDR (encapsulation 0x0000 or 0x0001) of at least 20 bytes,
+// or when the build found no Fast DDS headers to take SerializedPayload_t's layout from (then every
+// sample passes, and rclpy's own UUID check decides, as for a plain client).
 const uint8_t *cft_feedback_uuid(const void *payload);
 
 #endif  // CFT_ACTION_UUID_PROGRAM_H_
