@@ -15,8 +15,8 @@ Both read Fast DDS objects at offsets that come from the Fast DDS headers found 
 found, that header says the layout is unknown, and the guard then reads no Fast DDS layout and
 says so once at run time. ``CFT_FASTDDS_INCLUDE`` names the headers' directory explicitly.
 
-All metadata is in ``pyproject.toml``; this file only adds the C shared libraries. Each is built as a
-setuptools ``Extension`` so that ``pip install .`` puts it into the installed package and
+All metadata is in ``pyproject.toml``; this file only adds the C shared libraries. Each is built as
+a setuptools ``Extension`` so that ``pip install .`` puts it into the installed package and
 ``pip install -e .`` builds it in place, next to ``cft_action/guard.py``. Neither is imported: they
 have no Python module init and do not link against libpython.
 """
@@ -38,10 +38,11 @@ LAYOUT_HEADER = '_fastdds_layout.h'
 def fastdds_include_dirs() -> list[Path]:
     """The include directories of the Fast DDS headers to build against, or [] when there are none.
 
-    In this order: ``CFT_FASTDDS_INCLUDE``; this Python's prefix (the ROS wheels, a colcon
-    underlay); each ``AMENT_PREFIX_PATH`` entry (apt's ``/opt/ros/jazzy``, whose Fast DDS headers
-    are under ``include/fastrtps``); the prefixes of ``sys.path`` (pip's isolated build
-    environment, which gets the wheels' headers from ``[build-system] requires``).
+    The first directory that holds ``fastrtps/config.h`` wins, searched in this order:
+    ``CFT_FASTDDS_INCLUDE`` (directories separated by ``os.pathsep``); this Python's prefix (the
+    ROS wheels, a colcon underlay); each ``AMENT_PREFIX_PATH`` entry (apt's ``/opt/ros/jazzy``,
+    whose Fast DDS headers are under ``include/fastrtps``); the prefixes of ``sys.path`` (pip's
+    isolated build environment, which gets the wheels' headers from ``[build-system] requires``).
     """
     candidates = [Path(p) for p in os.environ.get('CFT_FASTDDS_INCLUDE', '').split(os.pathsep) if p]
     prefixes = [Path(sys.prefix)]
@@ -51,9 +52,11 @@ def fastdds_include_dirs() -> list[Path]:
         candidates += [prefix / 'include', prefix / 'include' / 'fastrtps']
     for include in candidates:
         if (include / 'fastrtps' / 'config.h').is_file():
-            # fastcdr and foonathan_memory: beside it (wheels) or in their own folders (apt).
+            # fastcdr and foonathan_memory: beside it (wheels), in their own folders (apt), or in a
+            # later candidate (CFT_FASTDDS_INCLUDE=<stack headers>:<venv>/include).
             root = include.parent if include.name == 'fastrtps' else include
-            return [include, root / 'fastcdr', root / 'foonathan_memory', root]
+            near = [root / 'fastcdr', root / 'foonathan_memory', root]
+            return [include] + [d for d in near + candidates if d.is_dir() and d != include]
     return []
 
 
@@ -66,13 +69,14 @@ def layout_header(build_temp: Path) -> str:
     source = ''
     if includes and compiler:
         result = subprocess.run(
-            [compiler, '-std=c++17', '-S', '-o', '-', '-fno-access-control', '-Wno-invalid-offsetof',
-             *[f'-I{d}' for d in includes], PROBE], capture_output=True, text=True, check=False)
+            [compiler, '-std=c++17', '-S', '-o', '-', '-fno-access-control',
+             '-Wno-invalid-offsetof', *[f'-I{d}' for d in includes], PROBE],
+            capture_output=True, text=True, check=False)
         lines = re.findall(r'^\s*->(\w+) \$?(-?\d+) ?(.*)$', result.stdout, re.MULTILINE)
         source = f'Fast DDS headers in {includes[0]}'
         if result.returncode != 0 or not lines:
-            print(f'setup.py: {PROBE} did not compile against {includes[0]}:\n{result.stderr[-2000:]}',
-                  file=sys.stderr)
+            print(f'setup.py: {PROBE} did not compile against {includes[0]}:\n'
+                  f'{result.stderr[-2000:]}', file=sys.stderr)
             lines, source = [], f'{PROBE} did not compile against {includes[0]}'
     else:
         source = 'no C++ compiler' if includes else 'no Fast DDS headers were found at build time'
@@ -84,10 +88,12 @@ def layout_header(build_temp: Path) -> str:
         source = (f'the headers of Fast DDS {version} (HAVE_SECURITY '
                   f'{values["CFT_LAYOUT_HAVE_SECURITY"]}) in {includes[0]}')
         out.append('#define CFT_LAYOUT_KNOWN 1')
-        out += [f'#define {name} {value}' + (f'  // {what}' if what else '') for name, value, what in lines]
+        out += [f'#define {name} {value}' + (f'  // {what}' if what else '')
+                for name, value, what in lines]
     else:
         out.append('#define CFT_LAYOUT_KNOWN 0')
-    out.append('#define CFT_LAYOUT_SOURCE "{}"'.format(source.replace('\\', '\\\\').replace('"', "'")))
+    quoted = source.replace('\\', '\\\\').replace('"', "'")
+    out.append(f'#define CFT_LAYOUT_SOURCE "{quoted}"')
     out.append('#endif  // CFT_ACTION_FASTDDS_LAYOUT_H_')
     (build_temp / LAYOUT_HEADER).write_text('\n'.join(out) + '\n')
     print(f'setup.py: Fast DDS layout from {source}', file=sys.stderr)
@@ -95,7 +101,7 @@ def layout_header(build_temp: Path) -> str:
 
 
 class BuildWithLayout(build_ext):
-    """build_ext that first writes _fastdds_layout.h and puts it on every extension's include path."""
+    """build_ext that first writes _fastdds_layout.h and puts it on each extension's includes."""
 
     def run(self) -> None:
         build_temp = Path(self.build_temp).resolve()

@@ -337,7 +337,8 @@ def test_a_layout_the_guard_cannot_verify_leaves_every_verdict_to_fast_dds(ros, 
             published = [(100 * round_ + k, uuid) for k, uuid in enumerate(uuids())]
             publish(child, published)
             expected = expected_keys(expression, [], published)
-            assert ros.spin_until(lambda: all(r.keys[-len(expected):] == expected for r in readers),
+            assert ros.spin_until(lambda want=expected: all(r.keys[-len(want):] == want
+                                                            for r in readers),
                                   timeout=30), [r.keys for r in readers]
         counts = child.request_json('stats', 'STATS')
         assert counts['compiled'] == 0 and counts['uuid_verdicts'] == 0, counts
