@@ -56,6 +56,8 @@ __thread const void *cft_filtering_writer;
 // How far from the headers' m_guid the reader's GUID is looked for in the loaded library's
 // ReaderProxyData (apt's SECURITY=ON build: 8 bytes later).
 #define SHIFT_WINDOW 64
+// SecurityManager::cancel_init(), exported only by a Fast DDS built with SECURITY=ON.
+#define SECURITY_ONLY_SYMBOL "_ZN8eprosima8fastrtps4rtps8security15SecurityManager11cancel_initEv"
 
 // Exported for the layout tests: {which} -> the headers' offset the guard reads at; -1 past the end
 // (and for every `which` in a build without headers). The order is tests/test_guard_filter.py's.
@@ -111,16 +113,10 @@ static long shift;
 #endif
 static char layout_report[512] = "not checked yet: no filtered reader has been seen";
 
-#if CFT_LAYOUT_KNOWN
-// Whether the loaded libfastrtps is a security build, from a symbol only such a build exports.
-static const char *loaded_security(void) {
-  void *handle = dlopen("libfastrtps.so.2.14", RTLD_LAZY | RTLD_NOLOAD);
-  if (handle == NULL) return "?";
-  bool security = dlsym(handle, "_ZN8eprosima8fastrtps4rtps8security15SecurityManager11cancel_initEv") != NULL;
-  dlclose(handle);
-  return security ? "1" : "0";
-}
-#endif
+// HAVE_SECURITY of the loaded libfastrtps, for the report: "1" when it exports a symbol that only
+// a security build has. Looked up once, in cft_filter_enable, where _guard.c has just resolved
+// that library (no dlopen under a writer's stripe).
+static const char *loaded_security = "?";
 
 // Said only once a DDS-SQL filter is evaluated, when it matters: the library's own clients use
 // their own filter class (_uuid_class.h), which never comes here, and a server that only has such
@@ -137,7 +133,7 @@ static void layout_suspect(const char *what) {
 #if CFT_LAYOUT_KNOWN
     snprintf(layout_report, sizeof layout_report,
              "the loaded Fast DDS (HAVE_SECURITY %s) does not hold its reader discovery data in the "
-             "layout of %s%s (%s)", loaded_security(), CFT_LAYOUT_SOURCE,
+             "layout of %s%s (%s)", loaded_security, CFT_LAYOUT_SOURCE,
              layout_located ? ", moved to where the reader's GUID was found" : "", what);
 #else
     snprintf(layout_report, sizeof layout_report,
@@ -189,7 +185,7 @@ static bool located(const uint8_t *info, const uint8_t *guid) {
                           at > 0 ? "later" : "earlier");
     snprintf(layout_report, sizeof layout_report,
              "the layout of %s, %s, checked on the loaded Fast DDS (HAVE_SECURITY %s): the reader's "
-             "GUID in m_guid and m_key", CFT_LAYOUT_SOURCE, moved, loaded_security());
+             "GUID in m_guid and m_key", CFT_LAYOUT_SOURCE, moved, loaded_security);
     shift = at;
     __atomic_store_n(&layout_located, true, __ATOMIC_RELEASE);
     if (cft_debug_enabled()) cft_say("reader discovery data: %s", layout_report);
@@ -357,6 +353,11 @@ static cft_evaluate_fn real_evaluate;  // set once, before the family turns acti
 static bool enabled, verify;
 
 void cft_filter_enable(cft_evaluate_fn real) {
+  void *handle = dlopen("libfastrtps.so.2.14", RTLD_LAZY | RTLD_NOLOAD);
+  if (handle != NULL) {
+    loaded_security = dlsym(handle, SECURITY_ONLY_SYMBOL) != NULL ? "1" : "0";
+    dlclose(handle);
+  }
   const char *off = getenv("CFT_GUARD_ACCELERATE");
   const char *check = getenv("CFT_GUARD_VERIFY");
   real_evaluate = real;
