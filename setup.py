@@ -1,25 +1,127 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 """Builds the package's two C shared libraries at install time.
 
-- ``_cftguard``, the server guard (``cft_action/_guard.c``), ``LD_PRELOAD``-ed into servers;
-- ``_cftreader``, the reader lock (``cft_action/_reader_lock.c``), loaded with ctypes by
-  ``cft_action._rcl`` into every process that changes a filter.
+- ``_cftguard``, the server guard, ``LD_PRELOAD``-ed into servers: ``_guard.c`` (the locks and the
+  interposed Fast DDS members), ``_guard_filter.c`` (the DDS-SQL accelerator),
+  ``_guard_writer_qos.c`` (the writers' filtered-reader limit), ``_guard_log.c``, and the filter
+  classes it shares with the reader (``_filter_class.c``, ``_uuid_program.c``,
+  ``_node_program.c``);
+- ``_cftreader``, the reader lock and the reader's filter class (``_reader_lock.c``,
+  ``_reader_class.c``, ``_patch.c`` and the same three), loaded with ctypes by ``cft_action._rcl``
+  into every process that changes a filter.
 
-All metadata is in ``pyproject.toml``; this file only adds the C shared libraries. Each is built as a
-setuptools ``Extension`` so that ``pip install .`` puts it into the installed package and
-``pip install -e .`` builds it in place, next to ``cft_action/guard.py``. Neither is imported: they have no Python module init and do not
-link against libpython.
+Both read Fast DDS objects at offsets that come from the Fast DDS headers found at build time:
+``cft_action/_fastdds_layout.cpp`` is compiled to assembly against them, and its offsets become
+``_fastdds_layout.h`` in the build directory (docs/INTERNALS.md, section 17). Where no headers are
+found, that header says the layout is unknown, and the guard then reads no Fast DDS layout and
+says so once at run time. ``CFT_FASTDDS_INCLUDE`` names the headers' directory explicitly.
+
+All metadata is in ``pyproject.toml``; this file only adds the C shared libraries. Each is built as
+a setuptools ``Extension`` so that ``pip install .`` puts it into the installed package and
+``pip install -e .`` builds it in place, next to ``cft_action/guard.py``. Neither is imported: they
+have no Python module init and do not link against libpython.
 """
 
+import os
+import re
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
 from setuptools import Extension, setup
+from setuptools.command.build_ext import build_ext
+
+PROBE = 'cft_action/_fastdds_layout.cpp'
+LAYOUT_HEADER = '_fastdds_layout.h'
+
+
+def fastdds_include_dirs() -> list[Path]:
+    """The include directories of the Fast DDS headers to build against, or [] when there are none.
+
+    The first directory that holds ``fastrtps/config.h`` wins, searched in this order:
+    ``CFT_FASTDDS_INCLUDE`` (directories separated by ``os.pathsep``); this Python's prefix (the
+    ROS wheels, a colcon underlay); each ``AMENT_PREFIX_PATH`` entry (apt's ``/opt/ros/jazzy``,
+    whose Fast DDS headers are under ``include/fastrtps``); the prefixes of ``sys.path`` (pip's
+    isolated build environment, which gets the wheels' headers from ``[build-system] requires``).
+    """
+    candidates = [Path(p) for p in os.environ.get('CFT_FASTDDS_INCLUDE', '').split(os.pathsep) if p]
+    prefixes = [Path(sys.prefix)]
+    prefixes += [Path(p) for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+    prefixes += [Path(p).parents[2] for p in sys.path if p.endswith('site-packages')]
+    for prefix in prefixes:
+        candidates += [prefix / 'include', prefix / 'include' / 'fastrtps']
+    for include in candidates:
+        if (include / 'fastrtps' / 'config.h').is_file():
+            # fastcdr and foonathan_memory: beside it (wheels), in their own folders (apt), or in a
+            # later candidate (CFT_FASTDDS_INCLUDE=<stack headers>:<venv>/include).
+            root = include.parent if include.name == 'fastrtps' else include
+            near = [root / 'fastcdr', root / 'foonathan_memory', root]
+            return [include] + [d for d in near + candidates if d.is_dir() and d != include]
+    return []
+
+
+def layout_header(build_temp: Path) -> str:
+    """Write ``_fastdds_layout.h`` into ``build_temp`` and return what it was made from."""
+    build_temp.mkdir(parents=True, exist_ok=True)
+    includes = fastdds_include_dirs()
+    compiler = os.environ.get('CXX') or shutil.which('c++') or shutil.which('g++')
+    lines: list[str] = []
+    source = ''
+    if includes and compiler:
+        result = subprocess.run(
+            [compiler, '-std=c++17', '-S', '-o', '-', '-fno-access-control',
+             '-Wno-invalid-offsetof', *[f'-I{d}' for d in includes], PROBE],
+            capture_output=True, text=True, check=False)
+        lines = re.findall(r'^\s*->(\w+) \$?(-?\d+) ?(.*)$', result.stdout, re.MULTILINE)
+        source = f'Fast DDS headers in {includes[0]}'
+        if result.returncode != 0 or not lines:
+            print(f'setup.py: {PROBE} did not compile against {includes[0]}:\n'
+                  f'{result.stderr[-2000:]}', file=sys.stderr)
+            lines, source = [], f'{PROBE} did not compile against {includes[0]}'
+    else:
+        source = 'no C++ compiler' if includes else 'no Fast DDS headers were found at build time'
+    values = {name: value for name, value, _ in lines}
+    out = ['// Generated by setup.py from cft_action/_fastdds_layout.cpp: do not edit.',
+           '#ifndef CFT_ACTION_FASTDDS_LAYOUT_H_', '#define CFT_ACTION_FASTDDS_LAYOUT_H_']
+    if values:
+        version = '.'.join(values[f'CFT_LAYOUT_VERSION_{p}'] for p in ('MAJOR', 'MINOR', 'MICRO'))
+        source = (f'the headers of Fast DDS {version} (HAVE_SECURITY '
+                  f'{values["CFT_LAYOUT_HAVE_SECURITY"]}) in {includes[0]}')
+        out.append('#define CFT_LAYOUT_KNOWN 1')
+        out += [f'#define {name} {value}' + (f'  // {what}' if what else '')
+                for name, value, what in lines]
+    else:
+        out.append('#define CFT_LAYOUT_KNOWN 0')
+    quoted = source.replace('\\', '\\\\').replace('"', "'")
+    out.append(f'#define CFT_LAYOUT_SOURCE "{quoted}"')
+    out.append('#endif  // CFT_ACTION_FASTDDS_LAYOUT_H_')
+    (build_temp / LAYOUT_HEADER).write_text('\n'.join(out) + '\n')
+    print(f'setup.py: Fast DDS layout from {source}', file=sys.stderr)
+    return source
+
+
+class BuildWithLayout(build_ext):
+    """build_ext that first writes _fastdds_layout.h and puts it on each extension's includes."""
+
+    def run(self) -> None:
+        build_temp = Path(self.build_temp).resolve()
+        layout_header(build_temp)
+        for extension in self.extensions:
+            extension.include_dirs.insert(0, str(build_temp))
+            extension.depends.append(str(build_temp / LAYOUT_HEADER))
+        super().run()
+
 
 setup(
+    cmdclass={'build_ext': BuildWithLayout},
     ext_modules=[
         Extension(
             'cft_action._cftguard',
             sources=['cft_action/_guard.c', 'cft_action/_guard_filter.c',
-                     'cft_action/_guard_writer_qos.c', 'cft_action/_filter_class.c',
-                     'cft_action/_uuid_program.c', 'cft_action/_node_program.c'],
+                     'cft_action/_guard_writer_qos.c', 'cft_action/_guard_log.c',
+                     'cft_action/_filter_class.c', 'cft_action/_uuid_program.c',
+                     'cft_action/_node_program.c'],
             libraries=['dl', 'pthread'],
             # Export only the interposed Fast DDS and rmw_fastrtps functions and the cft_guard_*
             # C API.

@@ -1,9 +1,8 @@
 // Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 //
 // The body of a serialized sample, as Fast DDS hands it to a content filter: a SerializedPayload_t
-// (public header fastdds/rtps/common/SerializedPayload.h): uint16_t encapsulation, then uint32_t
-// length, then octet *data. tests/test_uuid_class.py checks the two offsets against the
-// headers.
+// (public header fastdds/rtps/common/SerializedPayload.h), whose `length` and `data` offsets come
+// from the headers the build found (_fastdds_layout.h).
 #ifndef CFT_ACTION_CDR_H_
 #define CFT_ACTION_CDR_H_
 
@@ -11,13 +10,15 @@
 #include <stdint.h>
 #include <string.h>
 
-#define PAYLOAD_LENGTH 4
-#define PAYLOAD_DATA 8
+#include "_fastdds_layout.h"  // CFT_LAYOUT_KNOWN, PAYLOAD_LENGTH, PAYLOAD_DATA
 
 // The body after the 4-byte encapsulation header, if the sample is plain CDR (big endian 0x0000
-// or little endian 0x0001); else NULL. *body_length: its bytes; *little: its byte order.
+// or little endian 0x0001); else NULL. *body_length: its bytes; *little: its byte order. NULL
+// too when the build found no Fast DDS headers to take the layout from: then every sample passes,
+// and the Python side decides, as for a plain subscription.
 static inline const uint8_t *cft_cdr_body(const void *payload, uint32_t *body_length,
                                           bool *little) {
+#if CFT_LAYOUT_KNOWN
   const uint8_t *p = payload;
   uint32_t length;
   const uint8_t *data;
@@ -27,6 +28,10 @@ static inline const uint8_t *cft_cdr_body(const void *payload, uint32_t *body_le
   *body_length = length - 4;
   *little = data[1] == 1;
   return data + 4;
+#else
+  (void)payload, (void)body_length, (void)little;
+  return NULL;
+#endif
 }
 
 #endif  // CFT_ACTION_CDR_H_

@@ -55,6 +55,7 @@ static const struct grammar node_grammar = {node_compile, node_matches};
 // Of every filter of this library: verdicts, and filters created or changed (each is a filter
 // event at a writer or a reader of this process).
 static unsigned long total_verdicts, total_changes;
+static const struct cft_filter_class_owner *owner;  // set by cft_filter_factory_for before any create
 
 struct filter {
   const void *const *vtable;
@@ -92,7 +93,8 @@ static uint32_t factory_create(const struct factory *self, const char *class_nam
   (void)class_name, (void)type_name, (void)data_type, (void)filter_parameters;
   struct filter *existing = *filter_instance;
   if (expression == NULL) return existing != NULL ? RETCODE_OK : RETCODE_BAD_PARAMETER;
-  if (existing == NULL && !cft_filter_class_may_create()) return RETCODE_UNSUPPORTED;
+  const struct cft_filter_class_owner *decides = __atomic_load_n(&owner, __ATOMIC_ACQUIRE);
+  if (existing == NULL && (decides == NULL || !decides->may_create())) return RETCODE_UNSUPPORTED;
   void *program = self->grammar->compile(expression);
   if (program == NULL) return RETCODE_BAD_PARAMETER;
   if (existing != NULL) {  // an update in place: Fast DDS hands back only this factory's filters
@@ -115,7 +117,7 @@ static uint32_t factory_create(const struct factory *self, const char *class_nam
   filter->program = program;
   *filter_instance = filter;
   __atomic_fetch_add(&total_changes, 1, __ATOMIC_RELAXED);
-  cft_filter_class_created(filter);
+  decides->created(filter);
   return RETCODE_OK;
 }
 
@@ -135,11 +137,12 @@ static const void *const factory_vtable[] = {(const void *)factory_create,
 static const struct factory uuid_factory = {factory_vtable, &uuid_grammar};
 static const struct factory node_factory = {factory_vtable, &node_grammar};
 
-void *cft_filter_factory_for(const char *class_name) {
-  if (class_name == NULL) return NULL;
-  if (strcmp(class_name, CFT_UUID_CLASS) == 0) return (void *)&uuid_factory;
-  if (strcmp(class_name, CFT_NODE_CLASS) == 0) return (void *)&node_factory;
-  return NULL;
+void *cft_filter_factory_for(const char *class_name, const struct cft_filter_class_owner *by) {
+  const struct factory *found = NULL;
+  if (class_name != NULL && strcmp(class_name, CFT_UUID_CLASS) == 0) found = &uuid_factory;
+  if (class_name != NULL && strcmp(class_name, CFT_NODE_CLASS) == 0) found = &node_factory;
+  if (found != NULL) __atomic_store_n(&owner, by, __ATOMIC_RELEASE);
+  return (void *)found;
 }
 
 unsigned long cft_filter_verdicts(const void *filter) {

@@ -25,17 +25,20 @@
 #define CFT_UUID_CLASS "CFT_ACTION_UUID"
 #define CFT_NODE_CLASS "CFT_ACTION_NODE"
 
+// What the library that links this file decides about the filters of its process: whether a
+// factory may create a filter now (the guard creates them for its writers and readers; a client's
+// process only for its own readers, since a writer there would filter unguarded), and what it
+// does with one a factory created (not updated); `filter` is opaque. Given by that library, so
+// that calls go one way: from it into this file.
+struct cft_filter_class_owner {
+  bool (*may_create)(void);
+  void (*created)(void *filter);
+};
+
 // The factory (an object with an IContentFilterFactory vtable) if `class_name` is one of these
-// classes, else NULL.
-void *cft_filter_factory_for(const char *class_name);
-
-// Defined by the library that links this file: whether a factory may create a filter now. The
-// guard creates them for its writers and readers; a client's process only for its own readers
-// (a writer there would filter unguarded).
-bool cft_filter_class_may_create(void);
-
-// Called after a filter was created (not updated) by a factory; `filter` is opaque.
-void cft_filter_class_created(void *filter);
+// classes, else NULL. Its filters follow `owner`'s decisions from then on (the same owner on every
+// call).
+void *cft_filter_factory_for(const char *class_name, const struct cft_filter_class_owner *owner);
 
 // How many verdicts `filter` has given since it was created.
 unsigned long cft_filter_verdicts(const void *filter);

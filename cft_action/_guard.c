@@ -22,15 +22,15 @@
 // RTLD_NEXT alone does not work: rmw loads Fast DDS with RTLD_LOCAL, outside the global scope.
 //
 // It never aborts and prints nothing in the normal case (set CFT_GUARD_DEBUG=1 to see what it
-// does). It is only ever preloaded, never imported, and needs no Fast DDS headers.
-// Built by setup.py, with the other parts of the guard (_guard.h lists them).
+// does). It is only ever preloaded, never imported. This file needs no Fast DDS headers; the
+// layouts that the other parts read come from those found at build time (_fastdds_layout.h).
+// setup.py builds it with the other parts of the guard into one library (_guard.h lists them).
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
 #include <errno.h>
 #include <link.h>
 #include <pthread.h>
-#include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -40,6 +40,8 @@
 
 #include "_guard.h"
 #include "_filter_class.h"
+#include "_guard_filter.h"
+#include "_guard_log.h"
 
 // ---- public state codes (mirrored in cft_action/guard.py) ---------------------------------------
 #define CFT_GUARD_ARMED 0        // preloaded; no Fast DDS resolved yet (none loaded, or not used)
@@ -55,7 +57,8 @@
 // classes (_filter_class.h). Only Fast DDS 2.14 has the last two here.
 enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND = 4, FN_COUNT = 5 };
 
-// Fast DDS 2.x (libfastrtps), verified on 2.14.5 (ROS 2 Jazzy wheels).
+// Fast DDS 2.x (libfastrtps), verified on 2.14.5 (ROS 2 Jazzy wheels), on 2.14.6 built with
+// SECURITY=ON (apt's) and on the 2.14.x head (docs/COMPATIBILITY.md).
 #define PCNC2 "_ZN8eprosima7fastdds3dds14DataWriterImpl25perform_create_new_changeENS_8fastrtps4rtps12ChangeKind_tEPvRNS4_11WriteParamsERKNS4_16InstanceHandle_tE"
 #define PRFI2 "_ZN8eprosima7fastdds3dds14DataWriterImpl26process_reader_filter_infoERKNS_8fastrtps4rtps6GUID_tERKNS4_15ReaderProxyDataE"
 #define RRF2 "_ZN8eprosima7fastdds3dds14DataWriterImpl20remove_reader_filterERKNS_8fastrtps4rtps6GUID_tE"
@@ -101,28 +104,6 @@ static unsigned long filter_class_lookups, filter_class_filters;  // cft_guard_f
 static unsigned long degraded_count;     // nested acquisitions that gave up (see lock_writer)
 static int loaded_after_fastdds;         // set by the constructor
 static char late_reason[512];
-
-// ---- logging ---------------------------------------------------------------------------------------
-int cft_debug_enabled(void) {
-  const char *v = getenv("CFT_GUARD_DEBUG");
-  return v != NULL && v[0] != '\0' && strcmp(v, "0") != 0;
-}
-
-// One write(2) per line, so that lines from different threads do not interleave.
-void cft_say(const char *fmt, ...) {
-  char line[768];
-  int n = snprintf(line, sizeof line, "[cft_action guard %d] ", (int)getpid());
-  if (n < 0) return;
-  va_list ap;
-  va_start(ap, fmt);
-  int m = vsnprintf(line + n, sizeof line - (size_t)n - 1, fmt, ap);
-  va_end(ap);
-  if (m < 0) return;
-  size_t len = strlen(line);
-  line[len++] = '\n';
-  ssize_t ignored = write(STDERR_FILENO, line, len);
-  (void)ignored;
-}
 
 // ---- the locks --------------------------------------------------------------------------------------
 // Recursive, because a writer's filter code may re-enter another interposed member of the same
@@ -414,13 +395,21 @@ bool cft_evaluate2(const void *self, const void *payload, const void *sample_inf
   return real(self, payload, sample_info, reader_guid);
 }
 
+// The guard's filters of the library's classes: every one may be created, and each is counted.
+static bool guard_may_create(void) { return true; }
+static void guard_created(void *filter) {
+  (void)filter;
+  __atomic_fetch_add(&filter_class_filters, 1, __ATOMIC_RELAXED);
+}
+static const struct cft_filter_class_owner guard_owner = {guard_may_create, guard_created};
+
 // The writers of a guarded server filter for readers of the library's classes: every filter change
 // is locked here. Unguarded (an unknown Fast DDS), the classes stay unknown to the server, which
 // then sends such readers everything, as to plain ones.
 CFT_EXPORT void *cft_find2(void *self, const char *class_name) __asm__(FIND2);
 void *cft_find2(void *self, const char *class_name) {
   struct family *f = ready(0);
-  void *ours = cft_filter_factory_for(class_name);
+  void *ours = cft_filter_factory_for(class_name, &guard_owner);
   if (ours != NULL && f->state == CFT_GUARD_ACTIVE) {
     __atomic_fetch_add(&filter_class_lookups, 1, __ATOMIC_RELAXED);
     return ours;
@@ -434,11 +423,6 @@ void *cft_find2(void *self, const char *class_name) {
   return real(self, class_name);
 }
 
-bool cft_filter_class_may_create(void) { return true; }
-void cft_filter_class_created(void *filter) {
-  (void)filter;
-  __atomic_fetch_add(&filter_class_filters, 1, __ATOMIC_RELAXED);
-}
 
 // 0: lookups of the library's filter classes answered; 1: filters of those classes created (for
 // the writers and readers of this process); 2: their verdicts; 3: filters created or changed.

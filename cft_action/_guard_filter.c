@@ -29,42 +29,49 @@
 //   stripe held (cft_filtering_writer), so table changes and verdicts of one writer never overlap.
 // - An entry remembers the filter instance of its first verdict; any other instance for it means
 //   a change this file did not see, and the entry is dropped.
-// - The ReaderProxyData layout is Fast DDS 2.14.5's (tests/test_guard_filter.py checks these
-//   offsets against the installed headers); every string read through it is checked for a sane
-//   length and terminator, and one failed check turns the verdicts off for the process.
+// - The ReaderProxyData layout comes from the Fast DDS headers the guard was built against
+//   (_fastdds_layout.h), checked on the loaded library's own data before it is used (see "reading
+//   the reader's discovery data" below); every string read through it is checked for a sane length
+//   and terminator, and one failed check turns the verdicts off for the process, said once.
 // - CFT_GUARD_VERIFY=1 asks Fast DDS too for every compiled verdict, counts disagreements and
 //   returns Fast DDS's verdict; CFT_GUARD_ACCELERATE=0 turns this file off.
 
 #define _GNU_SOURCE
+#include <dlfcn.h>
 #include <pthread.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
-#include "_cdr.h"
-#include "_guard.h"
+#include "_fastdds_layout.h"
+#include "_guard_filter.h"
+#include "_guard_log.h"
 #include "_uuid_program.h"
 
 __thread const void *cft_filtering_writer;
 
-// ---- Fast DDS 2.14.5 layouts (x86_64, libstdc++) -------------------------------------------------
-#define RPD_TYPE_NAME 1216          // ReaderProxyData::m_typeName (string_255)
-#define RPD_CONTENT_FILTER 1824     // ReaderProxyData::content_filter_ (ContentFilterProperty)
-#define CFP_RELATED_TOPIC 264       // ContentFilterProperty::related_topic_name (string_255)
-#define CFP_CLASS_NAME 528          // ContentFilterProperty::filter_class_name (string_255)
-#define CFP_EXPRESSION 792          // ContentFilterProperty::filter_expression (std::string)
-#define CFP_PARAMETERS 824          // ContentFilterProperty::expression_parameters
-#define RLV_VECTOR 32               // ResourceLimitedVector: vtable, 3 x size_t, then std::vector
-#define STRING255_SIZE 264          // fixed_string<255>: char[256], then size_t length
-#define STRING255_LENGTH 256
+// ---- Fast DDS layouts, from the headers the guard was built against (_fastdds_layout.h) ----------
 #define MAX_PARAMETERS 100
 #define MAX_EXPRESSION 65536        // an RTPS parameter cannot carry more
+// How far from the headers' m_guid the reader's GUID is looked for in the loaded library's
+// ReaderProxyData (apt's SECURITY=ON build: 8 bytes later).
+#define SHIFT_WINDOW 64
+// SecurityManager::cancel_init(), exported only by a Fast DDS built with SECURITY=ON.
+#define SECURITY_ONLY_SYMBOL "_ZN8eprosima8fastrtps4rtps8security15SecurityManager11cancel_initEv"
 
-// Exported for the layout test: {which} -> the constant above.
+// Exported for the layout tests: {which} -> the headers' offset the guard reads at; -1 past the end
+// (and for every `which` in a build without headers). The order is tests/test_guard_filter.py's.
 CFT_EXPORT long cft_guard_filter_layout(int which) {
+#if CFT_LAYOUT_KNOWN
   static const long layout[] = {RPD_TYPE_NAME, RPD_CONTENT_FILTER, CFP_RELATED_TOPIC,
                                 CFP_CLASS_NAME, CFP_EXPRESSION, CFP_PARAMETERS, RLV_VECTOR,
-                                STRING255_SIZE, STRING255_LENGTH, PAYLOAD_LENGTH, PAYLOAD_DATA};
+                                STRING255_SIZE, STRING255_LENGTH, PAYLOAD_LENGTH, PAYLOAD_DATA,
+                                RPD_GUID, RPD_KEY, RPD_TOPIC_NAME};
   return which >= 0 && which < (int)(sizeof layout / sizeof layout[0]) ? layout[which] : -1;
+#else
+  (void)which;
+  return -1;
+#endif
 }
 
 // ---- counters (cft_guard_filter_count) -----------------------------------------------------------
@@ -88,8 +95,28 @@ CFT_EXPORT unsigned long cft_guard_filter_count(int which) {
 }
 
 // ---- reading the reader's discovery data -----------------------------------------------------------
+// The headers give the layout of the Fast DDS the guard was built against; the library loaded may
+// be another build of 2.14 (apt's is SECURITY=ON, which puts two masks before m_guid and so moves
+// every later field). So the layout is checked against the loaded library's own data before it is
+// used: Fast DDS passes the reader's GUID beside its ReaderProxyData, and the data holds that GUID
+// twice, in m_guid and in m_key. The first reader's data is searched for the GUID within
+// SHIFT_WINDOW bytes of the headers' m_guid, where m_key holds it too at the same distance; the
+// headers' layout from m_guid on, moved by that distance (`shift`), is then the layout. Every
+// reader's data is checked again before its filter is read: its GUID in m_guid and in m_key, sane
+// type, topic and class names, and a related topic name equal to the reader's topic name (Fast
+// DDS filters only then). One failed check turns the verdicts off for the process.
 static bool layout_failed;  // set once, read without a lock: verdicts then all go to Fast DDS
-static const char *layout_failure;  // what did not look right; said at the first DDS-SQL verdict
+static pthread_mutex_t layout_lock = PTHREAD_MUTEX_INITIALIZER;
+#if CFT_LAYOUT_KNOWN
+static bool layout_located;  // set once, after shift (release)
+static long shift;
+#endif
+static char layout_report[512] = "not checked yet: no filtered reader has been seen";
+
+// HAVE_SECURITY of the loaded libfastrtps, for the report: "1" when it exports a symbol that only
+// a security build has. Looked up once, in cft_filter_enable, where _guard.c has just resolved
+// that library (no dlopen under a writer's stripe).
+static const char *loaded_security = "?";
 
 // Said only once a DDS-SQL filter is evaluated, when it matters: the library's own clients use
 // their own filter classes (_filter_class.h), which never comes here, and a server that only has such
@@ -97,22 +124,75 @@ static const char *layout_failure;  // what did not look right; said at the firs
 static void say_layout_failure(void) {
   static bool said;
   if (__atomic_load_n(&layout_failed, __ATOMIC_ACQUIRE) && !__atomic_exchange_n(&said, true, __ATOMIC_RELAXED))
-    cft_say("filter verdicts off: the reader discovery data does not look like Fast DDS 2.14.5's "
-            "(%s); every DDS-SQL filter goes to Fast DDS", layout_failure);
+    cft_say("filter verdicts off: %s; every DDS-SQL filter goes to Fast DDS", layout_report);
 }
 
 static void layout_suspect(const char *what) {
-  if (__atomic_load_n(&layout_failed, __ATOMIC_RELAXED)) return;
-  layout_failure = what;
-  __atomic_store_n(&layout_failed, true, __ATOMIC_RELEASE);
+  pthread_mutex_lock(&layout_lock);
+  if (!__atomic_load_n(&layout_failed, __ATOMIC_RELAXED)) {
+#if CFT_LAYOUT_KNOWN
+    snprintf(layout_report, sizeof layout_report,
+             "the loaded Fast DDS (HAVE_SECURITY %s) does not hold its reader discovery data in the "
+             "layout of %s%s (%s)", loaded_security, CFT_LAYOUT_SOURCE,
+             layout_located ? ", moved to where the reader's GUID was found" : "", what);
+#else
+    snprintf(layout_report, sizeof layout_report,
+             "the guard knows no Fast DDS layout: it was built from %s", what);
+#endif
+    __atomic_store_n(&layout_failed, true, __ATOMIC_RELEASE);
+  }
+  pthread_mutex_unlock(&layout_lock);
 }
 
+// What the guard knows about the layout it reads (for guard.layout()).
+CFT_EXPORT const char *cft_guard_filter_layout_report(void) {
+  pthread_mutex_lock(&layout_lock);
+  static char copy[sizeof layout_report];
+  memcpy(copy, layout_report, sizeof copy);
+  pthread_mutex_unlock(&layout_lock);
+  return copy;
+}
+
+#if CFT_LAYOUT_KNOWN
 // A fixed_string<255>, or NULL when its length and terminator disagree.
 static const char *string255(const uint8_t *at) {
   size_t length;
   memcpy(&length, at + STRING255_LENGTH, sizeof length);
-  if (length > 255 || at[length] != '\0' || memchr(at, '\0', length) != NULL) return NULL;
+  if (length >= STRING255_LENGTH || at[length] != '\0' || memchr(at, '\0', length) != NULL) return NULL;
   return (const char *)at;
+}
+
+static bool holds_guid(const uint8_t *info, long at, const uint8_t *guid) {
+  return memcmp(info + at + shift, guid, 16) == 0;
+}
+
+// The distance of the loaded library's m_guid from the headers', found once; false when the
+// reader's GUID is not where the headers' layout, moved as a whole, would have it.
+static bool located(const uint8_t *info, const uint8_t *guid) {
+  if (__atomic_load_n(&layout_located, __ATOMIC_ACQUIRE)) return true;
+  pthread_mutex_lock(&layout_lock);
+  int found = 0;
+  long at = 0;
+  for (long d = -SHIFT_WINDOW; !layout_located && d <= SHIFT_WINDOW; d += 4) {
+    if (memcmp(info + RPD_GUID + d, guid, 16) == 0 && memcmp(info + RPD_KEY + d, guid, 16) == 0) {
+      found++;
+      at = d;
+    }
+  }
+  if (!layout_located && found == 1 && !__atomic_load_n(&layout_failed, __ATOMIC_RELAXED)) {
+    char moved[64] = "as is";
+    if (at != 0) snprintf(moved, sizeof moved, "moved %ld bytes %s from m_guid on", at > 0 ? at : -at,
+                          at > 0 ? "later" : "earlier");
+    snprintf(layout_report, sizeof layout_report,
+             "the layout of %s, %s, checked on the loaded Fast DDS (HAVE_SECURITY %s): the reader's "
+             "GUID in m_guid and m_key", CFT_LAYOUT_SOURCE, moved, loaded_security);
+    shift = at;
+    __atomic_store_n(&layout_located, true, __ATOMIC_RELEASE);
+    if (cft_debug_enabled()) cft_say("reader discovery data: %s", layout_report);
+  }
+  bool ok = layout_located;
+  pthread_mutex_unlock(&layout_lock);
+  return ok;
 }
 
 static bool ends_with(const char *s, const char *tail) {
@@ -129,17 +209,32 @@ static bool is_feedback_type(const char *type) {
 
 // The reader's uuid program, or NULL when it has no filter (*filtered false) or one this file
 // does not answer.
-static struct program *program_of(const uint8_t *info, bool *filtered) {
-  const uint8_t *cfp = info + RPD_CONTENT_FILTER;
-  const char *type = string255(info + RPD_TYPE_NAME);
+static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool *filtered) {
+  if (!located(info, guid)) {
+    layout_suspect("the reader's GUID is not in m_guid and m_key, as a whole or moved");
+    return NULL;
+  }
+  if (!holds_guid(info, RPD_GUID, guid) || !holds_guid(info, RPD_KEY, guid)) {
+    layout_suspect("a reader's GUID is not where the first reader's was");
+    return NULL;
+  }
+  const uint8_t *cfp = info + RPD_CONTENT_FILTER + shift;
+  const char *type = string255(info + RPD_TYPE_NAME + shift);
+  const char *topic = string255(info + RPD_TOPIC_NAME + shift);
   const char *related = string255(cfp + CFP_RELATED_TOPIC);
   const char *class_name = string255(cfp + CFP_CLASS_NAME);
-  if (type == NULL || related == NULL || class_name == NULL) {
+  if (type == NULL || topic == NULL || related == NULL || class_name == NULL) {
     layout_suspect("a topic, type or filter class name");
     return NULL;
   }
   *filtered = class_name[0] != '\0';
   if (!*filtered) return NULL;
+  // Fast DDS filters for a reader only when its filter's related topic is the writer's topic,
+  // which the reader's topic is too (they matched).
+  if (strcmp(related, topic) != 0) {
+    layout_suspect("a filter's related topic name that is not its reader's topic name");
+    return NULL;
+  }
   const char *expression;
   size_t length;
   memcpy(&expression, cfp + CFP_EXPRESSION, sizeof expression);
@@ -175,6 +270,14 @@ static struct program *program_of(const uint8_t *info, bool *filtered) {
             program ? "uuid verdicts" : "left to Fast DDS", expression);
   return program;
 }
+#else
+// Built without Fast DDS headers: no layout to read the reader's filter with.
+static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool *filtered) {
+  (void)info, (void)guid, (void)filtered;
+  layout_suspect(CFT_LAYOUT_SOURCE);
+  return NULL;
+}
+#endif
 
 // ---- the table: (writer, reader GUID) -> program ---------------------------------------------------
 // Open addressing with a bounded probe. A missing entry is always safe (Fast DDS decides), so a
@@ -250,6 +353,11 @@ static cft_evaluate_fn real_evaluate;  // set once, before the family turns acti
 static bool enabled, verify;
 
 void cft_filter_enable(cft_evaluate_fn real) {
+  void *handle = dlopen("libfastrtps.so.2.14", RTLD_LAZY | RTLD_NOLOAD);
+  if (handle != NULL) {
+    loaded_security = dlsym(handle, SECURITY_ONLY_SYMBOL) != NULL ? "1" : "0";
+    dlclose(handle);
+  }
   const char *off = getenv("CFT_GUARD_ACCELERATE");
   const char *check = getenv("CFT_GUARD_VERIFY");
   real_evaluate = real;
@@ -264,7 +372,7 @@ void cft_filter_reader_changed(const void *writer, const void *reader_guid, cons
   if (!enabled || reader_guid == NULL) return;
   bool filtered = reader_info != NULL;
   struct program *program = reader_info != NULL && !__atomic_load_n(&layout_failed, __ATOMIC_RELAXED)
-                                ? program_of(reader_info, &filtered) : NULL;
+                                ? program_of(reader_info, reader_guid, &filtered) : NULL;
   if (program == NULL) {
     if (filtered) count(C_NOT_COMPILED);
     drop(writer, reader_guid, C_DROPPED);

@@ -31,16 +31,20 @@
 #include <stdio.h>
 #include <stdlib.h>
 
+#include "_fastdds_layout.h"
 #include "_guard.h"
+#include "_guard_log.h"
 
 #define GET_DATAWRITER_QOS \
   "_Z18get_datawriter_qosRK17rmw_qos_profile_sRK18rosidl_type_hash_sRN8eprosima7fastdds3dds13DataWriterQosE"
 #define RMW_SHARED_SONAME "librmw_fastrtps_shared_cpp.so"
 
-// DataWriterQos of Fast DDS 2.14.5: the offset of writer_resource_limits().reader_filters_allocation,
-// a ResourceLimitedContainerConfig {size_t initial, maximum, increment}. tests/test_guard.py checks
-// it against the installed headers, through cft_guard_writer_qos_layout.
-#define READER_FILTERS_OFFSET 1008
+// The offset of writer_resource_limits().reader_filters_allocation in DataWriterQos, a
+// ResourceLimitedContainerConfig {size_t initial, maximum, increment}, from the headers the guard
+// was built against (_fastdds_layout.h: DWQ_READER_FILTERS). The same on the wheels' 2.14.5, apt's
+// 2.14.6 (SECURITY=ON) and the 2.14.x head (docs/COMPATIBILITY.md): security adds no QoS member.
+// At run time it is used only where it holds Fast DDS's default {0, 32, 1}, which
+// rmw_fastrtps's get_datawriter_qos never changes: anything else there means another layout.
 static const size_t fastdds_default[3] = {0, 32, 1};
 
 #define DEFAULT_READER_FILTERS 1024
@@ -106,18 +110,27 @@ static void raise_reader_filters(void *qos) {
     say_left_once();
     return;
   }
-  size_t *config = (size_t *)((char *)qos + READER_FILTERS_OFFSET);
+#if CFT_LAYOUT_KNOWN
+  size_t *config = (size_t *)((char *)qos + DWQ_READER_FILTERS);
   if (config[0] != fastdds_default[0] || config[1] != fastdds_default[1] ||
       config[2] != fastdds_default[2]) {
     snprintf(left_reason, sizeof left_reason,
-             "the DataWriterQos does not hold {0, 32, 1} where Fast DDS 2.14.5 keeps "
-             "reader_filters_allocation (it holds {%zu, %zu, %zu})", config[0], config[1], config[2]);
+             "the DataWriterQos does not hold {0, 32, 1} where %.200s keep "
+             "reader_filters_allocation (it holds {%zu, %zu, %zu})", CFT_LAYOUT_SOURCE, config[0],
+             config[1], config[2]);
     __atomic_fetch_add(&counters[LEFT], 1, __ATOMIC_RELAXED);
     say_left_once();
     return;
   }
   config[1] = n;
   __atomic_fetch_add(&counters[RAISED], 1, __ATOMIC_RELAXED);
+#else
+  (void)qos;
+  snprintf(left_reason, sizeof left_reason, "the guard knows no DataWriterQos layout: it was built "
+           "from %s", CFT_LAYOUT_SOURCE);
+  __atomic_fetch_add(&counters[LEFT], 1, __ATOMIC_RELAXED);
+  say_left_once();
+#endif
 }
 
 CFT_EXPORT bool cft_get_datawriter_qos(const void *profile, const void *type_hash, void *qos)
@@ -144,7 +157,13 @@ CFT_EXPORT unsigned long cft_guard_writer_qos_count(int which) {
   return 0;
 }
 
-// The layout this file assumes, for the header probe: 0: READER_FILTERS_OFFSET; -1 past the end.
+// The layout this file assumes, for the header probe: 0: DWQ_READER_FILTERS; -1 past the end, and
+// in a build without headers.
 CFT_EXPORT long cft_guard_writer_qos_layout(int which) {
-  return which == 0 ? READER_FILTERS_OFFSET : -1;
+#if CFT_LAYOUT_KNOWN
+  return which == 0 ? DWQ_READER_FILTERS : -1;
+#else
+  (void)which;
+  return -1;
+#endif
 }

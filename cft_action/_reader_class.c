@@ -37,11 +37,12 @@ static __thread const char *requested;  // the class, inside cft_filter_class_be
 static __thread void *created;           // the filter a factory created last on this thread
 static struct cft_install installed = CFT_INSTALL_INIT;  // 0: ours; 2: the guard answers
 
-bool cft_filter_class_may_create(void) { return requested != NULL; }
-void cft_filter_class_created(void *filter) { created = filter; }
+static bool may_create(void) { return requested != NULL; }
+static void remember(void *filter) { created = filter; }
+static const struct cft_filter_class_owner reader_owner = {may_create, remember};
 
 static void *find(void *self, const char *class_name) {
-  void *factory = cft_filter_factory_for(class_name);
+  void *factory = cft_filter_factory_for(class_name, &reader_owner);
   return factory != NULL ? factory : real_find(self, class_name);
 }
 

@@ -36,7 +36,9 @@ struct program *cft_uuid_compile(const char *expression, const char *const *para
 bool cft_uuid_matches(const struct program *p, const uint8_t *uuid);
 
 // The 16 bytes of goal_id.uuid in a serialized action FeedbackMessage (a SerializedPayload_t *),
-// or NULL when the sample is not plain CDR (encapsulation 0x0000 or 0x0001) of at least 20 bytes.
+// or NULL when the sample is not plain CDR (encapsulation 0x0000 or 0x0001) of at least 20 bytes,
+// or when the build found no Fast DDS headers to take SerializedPayload_t's layout from (then every
+// sample passes, and rclpy's own UUID check decides, as for a plain client).
 const uint8_t *cft_feedback_uuid(const void *payload);
 
 #endif  // CFT_ACTION_UUID_PROGRAM_H_

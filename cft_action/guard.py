@@ -6,7 +6,9 @@ filtered reader that goes away, can crash the process that owns the writer (the 
 the discovery thread replaces the writer's per-reader filters without the writer's lock while a
 publish evaluates them (eProsima/Fast-DDS issue 4878). No client-side setting prevents it.
 
-The guard is a small C library, built with this package (``cft_action/_guard.c``). Preloaded into
+The guard is a small C library, built with this package from ``cft_action/_guard*.c`` and the
+filter class's ``_uuid_*.c`` (``_guard.h`` lists the parts; setup.py builds them, and takes the
+Fast DDS layouts they read from the Fast DDS headers it finds). Preloaded into
 the **server** process, it serializes each writer's publish path with the discovery path that
 changes that writer's filters. The server's code does not change::
 
@@ -30,13 +32,13 @@ from cft_action._native import extension_path, GUARD_LIBRARY
 from cft_action.errors import CftActionError
 
 __all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts',
-           'filter_counts', 'writer_limits', 'environment', 'READER_FILTERS_ENV']
+           'filter_counts', 'layout', 'writer_limits', 'environment', 'READER_FILTERS_ENV']
 
 #: Environment variable with the number of filtered readers that each writer of a guarded process
 #: filters for (1 to 4063; default 1024; Fast DDS's own limit is 32).
 READER_FILTERS_ENV = 'CFT_ACTION_READER_FILTERS'
 
-#: Name of the extension module that setup.py builds from ``_guard.c``.
+#: Name of the extension module that setup.py builds from the guard's C files.
 _MODULE = GUARD_LIBRARY
 
 # State codes of cft_guard_state() in _guard.c.
@@ -71,6 +73,8 @@ def _preloaded() -> Optional[ctypes.CDLL]:
     process.cft_guard_state.restype = ctypes.c_int
     process.cft_guard_reason.argtypes = []
     process.cft_guard_reason.restype = ctypes.c_char_p
+    process.cft_guard_filter_layout_report.argtypes = []
+    process.cft_guard_filter_layout_report.restype = ctypes.c_char_p
     return process
 
 
@@ -147,6 +151,21 @@ def filter_counts() -> dict[str, int]:
     An empty dict when the guard is not preloaded.
     """
     return _counters('cft_guard_filter_count', FILTER_COUNTERS)
+
+
+def layout() -> str:
+    """Return what the guard knows about the Fast DDS layout its filter verdicts read.
+
+    The layout comes from the Fast DDS headers the guard was built against, and is checked on the
+    loaded library's own reader discovery data before it is used: for example ``'the layout of the
+    headers of Fast DDS 2.14.5 (HAVE_SECURITY 0) in ..., moved 8 bytes later from m_guid on,
+    checked on the loaded Fast DDS (HAVE_SECURITY 1): ...'``. ``'not checked yet: ...'`` until a
+    filtered reader was seen; an empty string when the guard is not preloaded.
+    """
+    process = _preloaded()
+    if process is None:
+        return ''
+    return process.cft_guard_filter_layout_report().decode('utf-8', 'replace')
 
 
 #: The counters of cft_guard_filter_class_count() in _guard.c, in its order.

@@ -1,23 +1,21 @@
 #!/usr/bin/env bash
-# Print the guard's Fast DDS layout facts (compat/layout_probe.cpp) for one set of headers.
+# Print the Fast DDS layout facts that the guard's build takes from one set of headers: the same
+# probe as setup.py's (cft_action/_fastdds_layout.cpp, compiled to assembly; nothing is linked or
+# run), and the build options of the headers' fastrtps/config.h.
 #   compat/probe.sh VENV            the wheels' headers (VENV/include)
 #   compat/probe.sh VENV STACK      a stack's installed headers (STACK/install/include/fastrtps),
 #                                   the venv's fastcdr and foonathan_memory headers after them
-# Linked to that Fast DDS (rpath) for its static constants; no Fast DDS object is constructed.
 set -euo pipefail
 venv=$(realpath "$1"); stack=${2:+$(realpath "$2")}
-here=$(cd "$(dirname "$0")" && pwd)
-inc=() lib=()
+root=$(cd "$(dirname "$0")/.." && pwd)
+inc=()
 if [ -n "$stack" ]; then
-  inc+=("-I$stack/install/include/fastrtps") lib+=("$stack/install/lib")
+  inc+=("-I$stack/install/include/fastrtps")
   [ -e "$stack/install/include/fastrtps/fastrtps/config.h" ] || { echo "probe.sh: no headers in $stack" >&2; exit 2; }
 fi
-inc+=("-I$venv/include") lib+=("$venv/lib")
-links=(); for d in "${lib[@]}"; do links+=("-L$d" "-Wl,-rpath,$d"); done
-out=$(mktemp -d)
-trap 'rm -rf "$out"' EXIT
-${CXX:-c++} -std=c++17 -Wno-invalid-offsetof "${inc[@]}" "$here/layout_probe.cpp" -o "$out/probe" \
-  "${links[@]}" -lfastrtps -lfastcdr -Wl,--unresolved-symbols=ignore-in-shared-libs
-# The wheels' libraries find their vendored ones (ros_*.libs) only through LD_LIBRARY_PATH.
-libs=$(ls -d "$venv"/lib/python3*/site-packages/ros_*.libs | sort | tr '\n' ':')
-LD_LIBRARY_PATH="$(IFS=:; echo "${lib[*]}"):${libs%:}" "$out/probe"
+inc+=("-I$venv/include")
+config=$(for d in "${inc[@]}"; do f=${d#-I}/fastrtps/config.h; [ -e "$f" ] && { echo "$f"; break; }; done)
+echo "headers: $config"
+grep -E '^#define (HAVE_SECURITY|HAVE_SQLITE3|FASTRTPS_VERSION_STR) ' "$config"
+${CXX:-c++} -std=c++17 -S -o - -fno-access-control -Wno-invalid-offsetof "${inc[@]}" \
+  "$root/cft_action/_fastdds_layout.cpp" | sed -n 's/^[[:space:]]*->//p'

@@ -5,7 +5,9 @@ A ROS session in the test process is :class:`harness.ros.RosSession`.
 
 from __future__ import annotations
 
+import importlib.metadata
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -73,3 +75,22 @@ def fastdds_header_probe(source: str, tmp_path: Path) -> list[int]:
                    check=True, capture_output=True, timeout=120)
     return [int(v) for v in subprocess.run([str(binary)], check=True, capture_output=True,
                                            text=True, timeout=30).stdout.split()]
+
+
+def loaded_fastdds_version() -> Optional[tuple[int, int, int]]:
+    """The version of the libfastrtps this process has loaded, or None when it cannot tell.
+
+    From the file's real name (a stack's ``libfastrtps.so.2.14.6``), or, for the ROS wheels' copy
+    in this venv (named only ``libfastrtps.so.2.14``), from the ``ros-fastrtps`` wheel's version.
+    """
+    with open('/proc/self/maps') as maps:
+        paths = {line.split()[-1] for line in maps if 'libfastrtps.so' in line}
+    for path in paths:
+        real = os.path.realpath(path)
+        match = re.search(r'libfastrtps\.so\.(\d+)\.(\d+)\.(\d+)$', real)
+        if match is None and Path(real).parent == Path(sys.prefix, 'lib').resolve():
+            match = re.match(r'(\d+)\.(\d+)\.(\d+)', importlib.metadata.version('ros-fastrtps'))
+        if match is not None:
+            major, minor, micro = (int(v) for v in match.groups())
+            return major, minor, micro
+    return None

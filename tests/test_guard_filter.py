@@ -9,6 +9,8 @@
 - On the real stack, a guarded publisher with ``CFT_GUARD_VERIFY=1`` asks Fast DDS for every verdict
   it gives, and they never disagree; each reader gets exactly the samples its filter matches.
 - A filter changed while the server publishes is answered with the new filter from then on.
+- A guard whose layout does not match the loaded Fast DDS (built here from a deliberately wrong
+  layout header) says so once, leaves every verdict to Fast DDS, and the server keeps publishing.
 """
 
 from __future__ import annotations
@@ -17,6 +19,8 @@ import ctypes
 import itertools
 import os
 import random
+import shutil
+import subprocess
 from pathlib import Path
 from typing import Iterator
 
@@ -129,16 +133,24 @@ int main() {
     memcpy(&word, reinterpret_cast<const char*>(&s) + at, sizeof word);
     if (word == 3 && at >= 4) length_at = at;
   }
-  printf("%ld %ld %zu %zu %zu %zu %ld %zu %ld %zu %zu\n",
+  printf("%ld %ld %zu %zu %zu %zu %ld %zu %ld %zu %zu %ld %ld %ld\n",
          diff(&rpd->typeName(), rpd), diff(&rpd->content_filter(), rpd),
          offsetof(ContentFilterProperty, related_topic_name),
          offsetof(ContentFilterProperty, filter_class_name),
          offsetof(ContentFilterProperty, filter_expression),
          offsetof(ContentFilterProperty, expression_parameters), vector_at, sizeof(string_255),
-         length_at, offsetof(SerializedPayload_t, length), offsetof(SerializedPayload_t, data));
+         length_at, offsetof(SerializedPayload_t, length), offsetof(SerializedPayload_t, data),
+         diff(&rpd->guid(), rpd), diff(&rpd->key(), rpd), diff(&rpd->topicName(), rpd));
   return 0;
 }
 '''
+
+
+#: The names of cft_guard_filter_layout()'s values, in its order (the _fastdds_layout.h names).
+LAYOUT_NAMES = ('RPD_TYPE_NAME', 'RPD_CONTENT_FILTER', 'CFP_RELATED_TOPIC', 'CFP_CLASS_NAME',
+                'CFP_EXPRESSION', 'CFP_PARAMETERS', 'RLV_VECTOR', 'STRING255_SIZE',
+                'STRING255_LENGTH', 'PAYLOAD_LENGTH', 'PAYLOAD_DATA', 'RPD_GUID', 'RPD_KEY',
+                'RPD_TOPIC_NAME')
 
 
 def guard_library() -> ctypes.CDLL:
@@ -152,7 +164,26 @@ def test_the_layout_is_that_of_the_installed_fast_dds_headers(tmp_path: Path) ->
     library.cft_guard_filter_layout.restype = ctypes.c_long
     ours = [library.cft_guard_filter_layout(i) for i in range(len(headers))]
     assert ours == headers
+    assert len(headers) == len(LAYOUT_NAMES)
     assert library.cft_guard_filter_layout(len(headers)) == -1
+
+
+def guard_built_with(layout: dict[str, int], tmp_path: Path) -> Path:
+    """The guard's C files built into ``tmp_path`` with ``layout`` as their _fastdds_layout.h."""
+    compiler = shutil.which('cc') or shutil.which('gcc')
+    sources = Path(guard.__file__).parent
+    parts = sorted(sources.glob('_guard*.c')) + sorted(sources.glob('_uuid_*.c'))
+    if compiler is None or not parts:
+        pytest.skip("needs a C compiler and the guard's C files")
+    header = ['#define CFT_LAYOUT_KNOWN 1',
+              '#define CFT_LAYOUT_SOURCE "a layout made up by tests/test_guard_filter.py"']
+    header += [f'#define {name} {value}' for name, value in layout.items()]
+    (tmp_path / '_fastdds_layout.h').write_text('\n'.join(header) + '\n')
+    library = tmp_path / 'libcftguard_wrong_layout.so'
+    subprocess.run([compiler, '-shared', '-fPIC', '-O2', '-fvisibility=hidden', '-fexceptions',
+                    f'-I{tmp_path}', *map(str, parts), '-o', str(library), '-ldl', '-lpthread'],
+                   check=True, capture_output=True, timeout=120)
+    return library
 
 
 # --- the grammar ------------------------------------------------------------------------------
@@ -247,6 +278,9 @@ def test_verdicts_on_the_real_stack_equal_fast_dds(ros, publisher) -> None:
     assert counts['compiled'] >= own, counts
     assert counts['verified'] == counts['uuid_verdicts'] >= own * len(published), counts
     assert counts['fastdds_verdicts'] >= (len(CORPUS) - own) * len(published), counts
+    # The headers' layout was checked on the loaded Fast DDS's own reader data (as is on the wheels,
+    # moved on a security build such as apt's).
+    assert 'checked on the loaded Fast DDS' in counts['layout'], counts
 
 
 def test_a_changed_filter_is_answered_with_the_new_filter(ros, publisher) -> None:
@@ -278,3 +312,42 @@ def test_a_changed_filter_is_answered_with_the_new_filter(ros, publisher) -> Non
     counts = child.request_json('stats', 'STATS')
     assert counts['compiled'] >= 2 and counts['uuid_verdicts'] > 0, counts
     assert counts['fastdds_verdicts'] == 0, counts
+
+
+def test_a_layout_the_guard_cannot_verify_leaves_every_verdict_to_fast_dds(ros, tmp_path) -> None:
+    """A guard built from a layout that is not the loaded Fast DDS's: every field from m_key on
+    8 bytes later than the headers say, as a build that inserted a member there would have them."""
+    library = guard_library()
+    library.cft_guard_filter_layout.restype = ctypes.c_long
+    library.cft_guard_writer_qos_layout.restype = ctypes.c_long
+    layout = {name: library.cft_guard_filter_layout(i) for i, name in enumerate(LAYOUT_NAMES)}
+    layout['DWQ_READER_FILTERS'] = library.cft_guard_writer_qos_layout(0)
+    for name in ('RPD_KEY', 'RPD_TYPE_NAME', 'RPD_TOPIC_NAME', 'RPD_CONTENT_FILTER'):
+        layout[name] += 8
+    wrong = guard_built_with(layout, tmp_path)
+    preload = [str(wrong)] + os.environ.get('LD_PRELOAD', '').split()
+    action = '/' + unique_name('cft_wrong_layout')
+    child = helper_process('tests.helpers.feedback_publisher', [action],
+                           env={**os.environ, 'LD_PRELOAD': ' '.join(preload)})
+    try:
+        expression = uuid_prefix_term(TAG)
+        readers = [Reader(ros, action, expression, []) for _ in range(2)]
+        assert child.request('wait 2', 'MATCHED', timeout=40) == 'MATCHED'
+        for round_ in range(2):  # the server keeps publishing after it turned its verdicts off
+            published = [(100 * round_ + k, uuid) for k, uuid in enumerate(uuids())]
+            publish(child, published)
+            expected = expected_keys(expression, [], published)
+            assert ros.spin_until(lambda want=expected: all(r.keys[-len(want):] == want
+                                                            for r in readers),
+                                  timeout=30), [r.keys for r in readers]
+        counts = child.request_json('stats', 'STATS')
+        assert counts['compiled'] == 0 and counts['uuid_verdicts'] == 0, counts
+        assert counts['fastdds_verdicts'] >= 2 * 2 * len(uuids()), counts
+        assert counts['layout'].startswith('the loaded Fast DDS'), counts
+        assert 'a layout made up by tests/test_guard_filter.py' in counts['layout'], counts
+        assert child.popen.poll() is None
+        said = [line for line in child.all('[cft_action guard') if 'filter verdicts off' in line]
+        assert len(said) == 1, said
+        assert counts['layout'] in said[0]
+    finally:
+        child.stop()

@@ -6,7 +6,7 @@ is), reliable, keep all.
 Commands on stdin, one per line:
   wait N          wait until exactly N subscriptions matched; replies MATCHED or TIMEOUT
   pub K UUIDHEX   publish feedback [K] for the goal UUID (32 hex digits); no reply
-  stats           replies STATS <json>: the guard's filter counters in this process
+  stats           replies STATS <json>: the guard's filter counters and layout report (guard.layout())
 """
 
 import json
@@ -41,7 +41,7 @@ def main() -> None:
             message.feedback.sequence = [int(arguments[0])]
             publisher.publish(message)
         elif command == 'stats':
-            print('STATS', json.dumps(guard.filter_counts()), flush=True)
+            print('STATS', json.dumps({**guard.filter_counts(), 'layout': guard.layout()}), flush=True)
     node.destroy_node()
     rclpy.shutdown()
 

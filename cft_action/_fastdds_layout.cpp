@@ -1,0 +1,58 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The Fast DDS layouts the C parts of cft_action read, measured from the Fast DDS headers this is
+// compiled against (docs/INTERNALS.md, section 17). setup.py compiles it to assembly only
+// (`c++ -S -fno-access-control`: nothing is linked or run, no Fast DDS code executes) and turns
+// the `->NAME VALUE what` lines that the asm statements leave there into _fastdds_layout.h, which
+// the guard and the reader's filter class include instead of constants written by hand. This is
+// the asm-offsets technique of the Linux kernel. compat/probe.sh prints the same for a stack.
+//
+// -fno-access-control lets offsetof name the private members; -Wno-invalid-offsetof accepts
+// offsetof on classes that are not standard-layout, which GCC and Clang compute like any other.
+#include <fastrtps/config.h>
+#include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
+#include <fastdds/rtps/builtin/data/ReaderProxyData.h>
+#include <fastdds/rtps/common/SerializedPayload.h>
+#include <cstddef>
+
+using eprosima::fastdds::dds::DataWriterQos;
+using eprosima::fastdds::dds::WriterResourceLimitsQos;
+using eprosima::fastdds::rtps::ContentFilterProperty;
+using eprosima::fastrtps::ResourceLimitedVector;
+using eprosima::fastrtps::string_255;
+using eprosima::fastrtps::rtps::ReaderProxyData;
+using eprosima::fastrtps::rtps::SerializedPayload_t;
+
+#define LAYOUT(name, value, what) asm volatile("\n->" #name " %c0 " what : : "i"((long)(value)))
+
+void cft_fastdds_layout() {
+  LAYOUT(CFT_LAYOUT_VERSION_MAJOR, FASTRTPS_VERSION_MAJOR, "Fast DDS version of the headers");
+  LAYOUT(CFT_LAYOUT_VERSION_MINOR, FASTRTPS_VERSION_MINOR, "");
+  LAYOUT(CFT_LAYOUT_VERSION_MICRO, FASTRTPS_VERSION_MICRO, "");
+  LAYOUT(CFT_LAYOUT_HAVE_SECURITY, HAVE_SECURITY, "fastrtps/config.h");
+  LAYOUT(RPD_SIZE, sizeof(ReaderProxyData), "sizeof(ReaderProxyData)");
+  LAYOUT(RPD_GUID, offsetof(ReaderProxyData, m_guid), "ReaderProxyData::m_guid (GUID_t)");
+  LAYOUT(RPD_KEY, offsetof(ReaderProxyData, m_key), "ReaderProxyData::m_key (InstanceHandle_t)");
+  LAYOUT(RPD_TYPE_NAME, offsetof(ReaderProxyData, m_typeName), "ReaderProxyData::m_typeName");
+  LAYOUT(RPD_TOPIC_NAME, offsetof(ReaderProxyData, m_topicName), "ReaderProxyData::m_topicName");
+  LAYOUT(RPD_CONTENT_FILTER, offsetof(ReaderProxyData, content_filter_),
+         "ReaderProxyData::content_filter_ (ContentFilterProperty)");
+  LAYOUT(CFP_RELATED_TOPIC, offsetof(ContentFilterProperty, related_topic_name),
+         "ContentFilterProperty::related_topic_name (string_255)");
+  LAYOUT(CFP_CLASS_NAME, offsetof(ContentFilterProperty, filter_class_name),
+         "ContentFilterProperty::filter_class_name (string_255)");
+  LAYOUT(CFP_EXPRESSION, offsetof(ContentFilterProperty, filter_expression),
+         "ContentFilterProperty::filter_expression (std::string)");
+  LAYOUT(CFP_PARAMETERS, offsetof(ContentFilterProperty, expression_parameters),
+         "ContentFilterProperty::expression_parameters");
+  LAYOUT(RLV_VECTOR, offsetof(ResourceLimitedVector<string_255>, collection_),
+         "the std::vector inside a ResourceLimitedVector");
+  LAYOUT(STRING255_SIZE, sizeof(string_255), "sizeof(fixed_string<255>)");
+  LAYOUT(STRING255_LENGTH, offsetof(string_255, string_len), "fixed_string<255>::string_len");
+  LAYOUT(PAYLOAD_LENGTH, offsetof(SerializedPayload_t, length), "SerializedPayload_t::length");
+  LAYOUT(PAYLOAD_DATA, offsetof(SerializedPayload_t, data), "SerializedPayload_t::data");
+  LAYOUT(DWQ_READER_FILTERS,
+         offsetof(DataWriterQos, writer_resource_limits_) +
+             offsetof(WriterResourceLimitsQos, reader_filters_allocation),
+         "DataWriterQos::writer_resource_limits().reader_filters_allocation");
+}
