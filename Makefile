@@ -53,7 +53,8 @@ bench: $(STAMP)
 # 15 for the second stack, with ccache), and the tests then take 3-4 minutes a stack. Results: COMPAT_CACHE/results/<stack>-<time>/.
 COMPAT_CACHE ?= /work/.cache/cft-stack
 COMPAT_STACKS ?= apt-2.14.6 head-2.14.x
-COMPAT_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_action_client.py
+COMPAT_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_uuid_class.py \
+    tests/test_node_class.py tests/test_action_client.py
 COMPAT_BUILD ?= $(COMPAT_CACHE)/build_stack.sh
 
 compat: $(STAMP)
