@@ -15,6 +15,7 @@
 
 from __future__ import annotations
 
+import ast
 import ctypes
 import itertools
 import os
@@ -168,11 +169,22 @@ def test_the_layout_is_that_of_the_installed_fast_dds_headers(tmp_path: Path) ->
     assert library.cft_guard_filter_layout(len(headers)) == -1
 
 
+def guard_sources() -> list[Path]:
+    """The C files that setup.py builds into the guard, read from its Extension."""
+    root = Path(guard.__file__).parent.parent
+    tree = ast.parse((root / 'setup.py').read_text())
+    for call in ast.walk(tree):
+        if (isinstance(call, ast.Call) and call.args and isinstance(call.args[0], ast.Constant)
+                and call.args[0].value == 'cft_action._cftguard'):
+            sources = next(k.value for k in call.keywords if k.arg == 'sources')
+            return [root / ast.literal_eval(source) for source in sources.elts]
+    return []
+
+
 def guard_built_with(layout: dict[str, int], tmp_path: Path) -> Path:
     """The guard's C files built into ``tmp_path`` with ``layout`` as their _fastdds_layout.h."""
     compiler = shutil.which('cc') or shutil.which('gcc')
-    sources = Path(guard.__file__).parent
-    parts = sorted(sources.glob('_guard*.c')) + sorted(sources.glob('_uuid_*.c'))
+    parts = guard_sources()
     if compiler is None or not parts:
         pytest.skip("needs a C compiler and the guard's C files")
     header = ['#define CFT_LAYOUT_KNOWN 1',
