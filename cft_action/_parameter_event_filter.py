@@ -19,7 +19,8 @@ from rcl_interfaces.srv import GetParameterTypes
 from rclpy.node import Node
 from rclpy.subscription import Subscription
 
-from cft_action._filtered_reader import FilteredReader
+from cft_action import _rcl
+from cft_action._filtered_reader import filter_class_for, FilteredReader
 from cft_action._rclpy_compat import PromptLogger
 from cft_action.arrival import ArrivalGate, ProbeTarget, RemotePublishers
 from cft_action.errors import ContentFilterError
@@ -153,14 +154,15 @@ class ParameterEventFilter:
 
     :param node: The handler's node.
     :param logger: The handler's logger.
-    :param filter_class: The library's node filter class, which only guarded nodes' writers
-        evaluate, or None for DDS-SQL, which every node's writer evaluates.
+    :param writer_filtering: ``'guarded'``: the library's node filter class, which only guarded
+        nodes' writers evaluate; ``'any'``: DDS-SQL, which every node's writer evaluates. Its
+        environment variable wins (:func:`cft_action._filtered_reader.filter_class_for`).
     """
 
-    def __init__(self, node: Node, logger: PromptLogger, *,
-                 filter_class: Optional[str] = None) -> None:
+    def __init__(self, node: Node, logger: PromptLogger, writer_filtering: str = 'guarded') -> None:
         self.reader = FilteredReader(
-            logger, match_all=ALL_NODES, filter_class=filter_class,
+            logger, match_all=ALL_NODES,
+            filter_class=filter_class_for(writer_filtering, _rcl.NODE_FILTER_CLASS),
             unfiltered='parameter event filter not used, all parameter events are received as '
                        'with rclpy')
         self._logger = logger

@@ -69,8 +69,6 @@ from rclpy.parameter_event_handler import (
 from rclpy.qos import qos_profile_parameter_events, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
-from cft_action import _rcl
-from cft_action._filtered_reader import filter_class_for
 from cft_action._parameter_event_filter import (
     ALL_NODES,
     NO_NODES,
@@ -147,34 +145,26 @@ class ParameterEventHandler(_RclpyParameterEventHandler):
         :attr:`parameter_event_filter_state`.
 
         :param node: Used to subscribe to parameter_events topic
-        :param qos_profile: A QoSProfile or a history depth to apply to the subscription.
-            In the case that a history depth is provided, the QoS history is set to
-            KEEP_LAST, the QoS history depth is set to the value
-            of the parameter, and all other QoS settings are set to their default values.
+        :param qos_profile: A QoSProfile or a history depth to apply to the subscription (a depth
+            gives KEEP_LAST of that depth, and every other QoS setting its default).
         :param callback_group: The callback group for the subscription. If ``None``, then the
             default callback group for the node is used.
-        :param event_callbacks: User-defined callbacks for middleware events. Fast DDS counts the
-            events that the publishers filtered out as *lost*, so a ``message_lost`` callback
-            reports them too.
+        :param event_callbacks: User-defined callbacks for middleware events (Fast DDS 2.14.5
+            counts the events that guarded publishers filtered out as *lost*).
         :param qos_overriding_options: Options to customize QoS parameter overrides.
         :param raw: If ``True``, then received messages will be stored in raw binary
             representation.
-        :param writer_filtering: As for :class:`cft_action.ActionClient`: ``'guarded'`` (default)
-            filters with the library's node class, which only nodes run under ``cft-action
-            guard`` evaluate; the others send every event, and this handler's DDS reader drops
-            the unwatched ones. ``'any'``: DDS-SQL, which every node's writer evaluates, and which
-            :meth:`set_parameter_event_filter` needs for more than node names.
+        :param writer_filtering: As for :class:`cft_action.ActionClient`: ``'guarded'`` (default),
+            the library's node class, which only nodes under the guard filter on their side;
+            ``'any'``, DDS-SQL, which :meth:`set_parameter_event_filter` needs beyond node names.
         """
         # rclpy's constructor would create an unfiltered subscription, and giving that a first
         # filter later recreates its DataReader; so its three attributes are set here instead.
         self.node = node
         self.qos_profile = qos_profile  # type: ignore[assignment]  # rclpy types it QoSProfile only
         self._rclpy_callbacks = set_parameter_event_callbacks(self)  # what its methods use
-
         self._cft_logger = PromptLogger(node.get_logger().get_child('cft_action'))
-        self._filter = ParameterEventFilter(
-            node, self._cft_logger,
-            filter_class=filter_class_for(writer_filtering, _rcl.NODE_FILTER_CLASS))
+        self._filter = ParameterEventFilter(node, self._cft_logger, writer_filtering)
         self.parameter_event_subscription = self._filter.subscribe(
             node, self._rclpy_callbacks.event_callback, is_content_filter_supported(node),
             qos_profile=self.qos_profile, callback_group=callback_group,

@@ -103,8 +103,9 @@ def create_filtered_subscription(
     is installed before the subscription is added to the node, so no executor ever waits on it
     unfiltered and no sample arrives that does not match.
 
-    Fast DDS counts samples that the writer filtered out as *lost*: a ``message_lost`` callback in
-    ``event_callbacks`` would report them as false alarms, so passing one logs a warning.
+    Fast DDS 2.14.5 (not 2.14.6) counts samples that the writer filtered out as *lost*: a
+    ``message_lost`` callback in ``event_callbacks`` would report them as false alarms, so passing
+    one logs a warning.
 
     :param node: The node to create the subscription on.
     :param msg_type: The type of ROS messages the subscription will subscribe to.
@@ -209,8 +210,9 @@ def _warn_message_lost(node: Node) -> None:
     if not _message_lost_warned:
         _message_lost_warned = True
         node.get_logger().warning(
-            'message_lost callback on a content-filtered subscription: Fast DDS counts the '
-            'samples that the writer filtered out as lost, so this callback reports false alarms')
+            'message_lost callback on a content-filtered subscription: Fast DDS 2.14.5 counts the '
+            'samples that the writer filtered out as lost (2.14.6 does not), so this callback may '
+            'report false alarms')
 
 
 def set_content_filter(subscription: Subscription, filter_expression: str,
