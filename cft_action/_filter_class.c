@@ -55,7 +55,8 @@ static const struct grammar node_grammar = {node_compile, node_matches};
 // Of every filter of this library: verdicts, and filters created or changed (each is a filter
 // event at a writer or a reader of this process).
 static unsigned long total_verdicts, total_changes;
-static const struct cft_filter_class_owner *owner;  // set by cft_filter_factory_for before any create
+// Set by cft_filter_factory_for before any create.
+static const struct cft_filter_class_owner *owner;
 
 struct filter {
   const void *const *vtable;
@@ -137,12 +138,27 @@ static const void *const factory_vtable[] = {(const void *)factory_create,
 static const struct factory uuid_factory = {factory_vtable, &uuid_grammar};
 static const struct factory node_factory = {factory_vtable, &node_grammar};
 
+static const struct {
+  const char *name;
+  const struct factory *factory;
+} classes[] = {{CFT_UUID_CLASS, &uuid_factory}, {CFT_NODE_CLASS, &node_factory}};
+
+static int class_index(const char *class_name) {
+  for (int i = 0; class_name != NULL && i < (int)(sizeof classes / sizeof classes[0]); i++)
+    if (strcmp(class_name, classes[i].name) == 0) return i;
+  return -1;
+}
+
+const char *cft_filter_class_name(const char *class_name) {
+  int i = class_index(class_name);
+  return i < 0 ? NULL : classes[i].name;
+}
+
 void *cft_filter_factory_for(const char *class_name, const struct cft_filter_class_owner *by) {
-  const struct factory *found = NULL;
-  if (class_name != NULL && strcmp(class_name, CFT_UUID_CLASS) == 0) found = &uuid_factory;
-  if (class_name != NULL && strcmp(class_name, CFT_NODE_CLASS) == 0) found = &node_factory;
-  if (found != NULL) __atomic_store_n(&owner, by, __ATOMIC_RELEASE);
-  return (void *)found;
+  int i = class_index(class_name);
+  if (i < 0) return NULL;
+  __atomic_store_n(&owner, by, __ATOMIC_RELEASE);
+  return (void *)classes[i].factory;
 }
 
 unsigned long cft_filter_verdicts(const void *filter) {

@@ -40,6 +40,9 @@ struct cft_filter_class_owner {
 // call).
 void *cft_filter_factory_for(const char *class_name, const struct cft_filter_class_owner *owner);
 
+// This library's own copy of `class_name` if it names one of these classes, else NULL.
+const char *cft_filter_class_name(const char *class_name);
+
 // How many verdicts `filter` has given since it was created.
 unsigned long cft_filter_verdicts(const void *filter);
 

@@ -56,8 +56,8 @@ def set_filter(subscription_ptr: int, topic: str, expression: str,
 
 
 def apply_filter(subscription_ptr: int, topic: str, expression: str,
-                expression_parameters: Sequence[Literal] = (), *,
-                filter_class: Optional[str] = None) -> tuple[ContentFilterOptions, Optional[int]]:
+                 expression_parameters: Sequence[Literal] = (), *,
+                 filter_class: Optional[str] = None) -> tuple[ContentFilterOptions, Optional[int]]:
     """:func:`set_filter`, optionally with one of the library's filter classes
     (:func:`_rcl.set_content_filter`).
 
@@ -150,10 +150,10 @@ def filter_class_for(writer_filtering: str, guarded_class: str) -> Optional[str]
     :param guarded_class: the library's class for ``'guarded'``; ``'any'`` gives None, DDS-SQL.
     :raises ValueError: if the value names no known choice, saying where it came from.
     """
-    value = os.environ.get(WRITER_FILTERING_ENV) or writer_filtering
+    from_env = os.environ.get(WRITER_FILTERING_ENV)
+    value = from_env or writer_filtering
     if value not in WRITER_FILTERING:
-        source = (f'environment variable {WRITER_FILTERING_ENV}'
-                  if os.environ.get(WRITER_FILTERING_ENV) else 'writer_filtering')
+        source = f'environment variable {WRITER_FILTERING_ENV}' if from_env else 'writer_filtering'
         raise InvalidArgumentError(
             f'{source}={value!r}: expected one of {", ".join(WRITER_FILTERING)}')
     return guarded_class if value == 'guarded' else None
@@ -250,7 +250,7 @@ class FilteredReader:
                 return False
             with self._handle:
                 self._filter = apply_filter(self._pointer, self._topic, *options,
-                                           filter_class=self.filter_class)[0]
+                                            filter_class=self.filter_class)[0]
             self._updates += 1
             return True
 
@@ -275,7 +275,7 @@ class FilteredReader:
                 try:
                     with self._handle:
                         apply_filter(self._pointer, self._topic, self._match_all,
-                                    filter_class=self.filter_class)
+                                     filter_class=self.filter_class)
                     self._updates += 1
                 except ContentFilterError as e:
                     reason += ('; and letting everything through failed too, samples may be '

@@ -13,7 +13,6 @@
 // unsupported), so it sends that reader everything and filters nothing, unguarded.
 #define _GNU_SOURCE
 #include <dlfcn.h>
-#include <string.h>
 
 #include "_patch.h"
 #include "_filter_class.h"
@@ -76,11 +75,7 @@ EXPORT const char *cft_filter_class_error(void) { return installed.error; }
 // Around one rcl content-filter call for a reader that is to use `class_name` (CFT_UUID_CLASS or
 // CFT_NODE_CLASS; another name makes the call a plain DDS-SQL one).
 EXPORT void cft_filter_class_begin(const char *class_name) {
-  // Kept as this library's own string: the caller's may not outlive this call.
-  requested = class_name == NULL                      ? NULL
-              : strcmp(class_name, CFT_UUID_CLASS) == 0 ? CFT_UUID_CLASS
-              : strcmp(class_name, CFT_NODE_CLASS) == 0 ? CFT_NODE_CLASS
-                                                        : NULL;
+  requested = cft_filter_class_name(class_name);  // the caller's may not outlive this call
   created = NULL;
 }
 
