@@ -8,8 +8,9 @@ a goal's first feedback for any client, plain rclpy's too), without spinning, it
 with generated UUIDs and a feedback callback, 1 with a caller-supplied random ``goal_uuid`` and a
 feedback callback, and 1 without a feedback callback; then it spins until every answered goal
 has its result and prints ``RESULT <json>``: per goal with a callback, the feedback indices
-received, and whether it was answered. The feedback queue keeps the last 20 messages, as a
-deep-enough queue would.
+received, when each came, and whether it was answered; and the longest turns of the executor.
+The feedback queue keeps the last 40 messages: more than a shared machine's pauses of this process
+let pile up, fewer than the goals publish during STALL_S.
 
 STALL_S makes every call of rclpy's logger caller lookup (``_find_caller``, which takes 50-165 ms
 on its first call in a process) take that many seconds longer, so that a client that logs through
@@ -30,7 +31,7 @@ from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient
 
-DEPTH = 20
+DEPTH = 40
 ORDER = 10
 
 
@@ -71,21 +72,32 @@ def main() -> None:
     rcutils_logger._find_caller = slowed(stall_s)
     received: dict[str, list[int]] = {}
 
+    arrivals: dict[str, list[float]] = {}
+    start = time.monotonic()
+
     def on_feedback(key):
-        return lambda msg: received[key].append(msg.feedback.sequence[0])
+        def record(msg) -> None:
+            received[key].append(msg.feedback.sequence[0])
+            arrivals[key].append(round(time.monotonic() - start, 3))
+        return record
 
     sends = []
     for i in range(8):
         key = f'goal{i}'
         received[key] = []
+        arrivals[key] = []
         goal_uuid = UUID(uuid=list(uuid.uuid4().bytes)) if i == 6 else None
         callback = on_feedback(key) if i < 7 else None
         sends.append((key, client.send_goal_async(Fibonacci.Goal(order=ORDER), callback,
                                                   goal_uuid)))
+    sent = time.monotonic() - start
     deadline = time.monotonic() + 60
     results = {}
+    spins = []  # (when, how long) of every spin_once: a long one is a stall of this executor
     while time.monotonic() < deadline:
+        before = time.monotonic()
         rclpy.spin_once(node, timeout_sec=0.05)
+        spins.append((round(before - start, 3), round(time.monotonic() - before, 3)))
         for key, future in sends:
             if future.done() and future.result().accepted and key not in results:
                 results[key] = future.result().get_result_async()
@@ -94,8 +106,12 @@ def main() -> None:
             break
     for _ in range(10):  # feedback still queued behind the results
         rclpy.spin_once(node, timeout_sec=0.05)
-    report = {key: {'answered': future.done() and future.result().accepted,
-                    'feedback': received[key]} for key, future in sends[:7]}
+    report: dict = {key: {'answered': future.done() and future.result().accepted,
+                          'feedback': received[key], 'arrivals': arrivals[key]}
+                    for key, future in sends[:7]}
+    # Evidence for a loss: how long the sends took, and the longest executor turns.
+    report['timing'] = {'sent': round(sent, 3), 'filter': str(client.feedback_filter_state),
+                        'longest_spins': sorted(spins, key=lambda spin: -spin[1])[:5]}
     print('RESULT ' + json.dumps(report), flush=True)
 
 
