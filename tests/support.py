@@ -12,11 +12,13 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import pytest
+from test_msgs.action import Fibonacci
 
 from harness.proc import Proc, python_module
+from harness.ros import RosSession
 
 
 def helper_process(module: str, args: Sequence[object] = (), *, env: Optional[dict] = None,
@@ -94,3 +96,37 @@ def loaded_fastdds_version() -> Optional[tuple[int, int, int]]:
             major, minor, micro = (int(v) for v in match.groups())
             return major, minor, micro
     return None
+
+
+def round_trip(ros: RosSession, client: Any, tries: int = 10,
+               wait: Optional[Callable[[Callable[[], bool], float], bool]] = None) -> bool:
+    """Complete one order-0 goal (no feedback), resending while the service endpoints match.
+
+    wait_for_server sees the server in the graph; a goal response written before the server's
+    response writer matched this client's reader is lost for good (volatile), as with rclpy:
+    rmw_fastrtps waits 100 ms for that match, then drops the reply ("failed to send response
+    (timeout): client will not receive response"), e.g. while the server is still discovering the
+    readers of 40 other clients.
+
+    :param wait: how to wait for the response, ``ros.spin_until`` unless an executor already spins
+        in another thread.
+    """
+    for _ in range(tries):
+        future = client.send_goal_async(Fibonacci.Goal(order=0))
+        if (wait or ros.spin_until)(future.done, 2):
+            return future.result().accepted
+    return False
+
+
+def send(ros: RosSession, client: Any, order: int, **kwargs: Any) -> Any:
+    """Send a goal of ``order`` and return its goal handle, once answered."""
+    future = client.send_goal_async(Fibonacci.Goal(order=order), **kwargs)
+    assert ros.spin_until(future.done, 20)
+    return future.result()
+
+
+def result_of(ros: RosSession, goal_handle: Any) -> Any:
+    """The result response of an accepted goal."""
+    future = goal_handle.get_result_async()
+    assert ros.spin_until(future.done, 30)
+    return future.result()

@@ -23,7 +23,7 @@ from cft_action.client import FINISHED_GOAL_GRACE
 from cft_action.filters import NEVER_MATCH
 from harness.polling import wait_until
 from harness.ros import RosSession, unique_name
-from tests.support import action_server, helper_process
+from tests.support import action_server, helper_process, result_of, round_trip, send
 
 PERIOD = 0.01  # 100 Hz feedback per goal
 
@@ -131,34 +131,6 @@ def make_client(ros, action, **kwargs):
     assert client.wait_for_server(timeout_sec=20)
     assert round_trip(ros, client), 'the server never answered a goal'
     return client
-
-
-def round_trip(ros, client, tries=10, wait=None):
-    """Complete one order-0 goal (no feedback), resending while the service endpoints match.
-
-    wait_for_server sees the server in the graph; a goal response written before the server's
-    response writer matched this client's reader is lost for good (volatile), as with rclpy.
-
-    :param wait: how to wait for the response, ``ros.spin_until`` unless an executor already spins
-        in another thread.
-    """
-    for _ in range(tries):
-        future = client.send_goal_async(Fibonacci.Goal(order=0))
-        if (wait or ros.spin_until)(future.done, 2):
-            return future.result().accepted
-    return False
-
-
-def send(ros, client, order, **kwargs):
-    future = client.send_goal_async(Fibonacci.Goal(order=order), **kwargs)
-    assert ros.spin_until(future.done, 20)
-    return future.result()
-
-
-def result_of(ros, goal_handle):
-    future = goal_handle.get_result_async()
-    assert ros.spin_until(future.done, 30)
-    return future.result()
 
 
 @pytest.mark.parametrize('mode', ['client', 'goals', 'off'])

@@ -15,8 +15,7 @@ from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient, guard
 from harness.ros import unique_name
-from tests.support import action_server
-from tests.test_action_client import result_of, round_trip, send
+from tests.support import action_server, result_of, round_trip, send
 
 
 def compiled(child) -> int:
