@@ -45,7 +45,13 @@ def fastdds_include_dirs() -> list[Path]:
     whose Fast DDS headers are under ``include/fastrtps``); the prefixes of ``sys.path`` (pip's
     isolated build environment, which gets the wheels' headers from ``[build-system] requires``).
     """
-    candidates = [Path(p) for p in os.environ.get('CFT_FASTDDS_INCLUDE', '').split(os.pathsep) if p]
+    explicit = [Path(p) for p in os.environ.get('CFT_FASTDDS_INCLUDE', '').split(os.pathsep) if p]
+    # An explicit directory may also be one above the headers' own, as a prefix's include/ is.
+    candidates = [d for p in explicit for d in (p, p / 'fastrtps')]
+    if explicit and not any((d / 'fastrtps' / 'config.h').is_file() for d in candidates):
+        # Building from other headers than the ones named would be a silent substitution.
+        raise SystemExit(f'setup.py: CFT_FASTDDS_INCLUDE={os.environ["CFT_FASTDDS_INCLUDE"]} has '
+                         'no fastrtps/config.h in any of its directories or their fastrtps/')
     prefixes = [Path(sys.prefix)]
     prefixes += [Path(p) for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
     prefixes += [Path(p).parents[2] for p in sys.path if p.endswith('site-packages')]
@@ -59,6 +65,11 @@ def fastdds_include_dirs() -> list[Path]:
             near = [root / 'fastcdr', root / 'foonathan_memory', root]
             return [include] + [d for d in near + candidates if d.is_dir() and d != include]
     return []
+
+
+def c_string(text: str) -> str:
+    """``text`` as a C string literal."""
+    return '"' + text.replace('\\', '\\\\').replace('"', '\\"') + '"'
 
 
 def layout_header(build_temp: Path) -> str:
@@ -93,8 +104,10 @@ def layout_header(build_temp: Path) -> str:
                 for name, value, what in lines]
     else:
         out.append('#define CFT_LAYOUT_KNOWN 0')
-    quoted = source.replace('\\', '\\\\').replace('"', "'")
-    out.append(f'#define CFT_LAYOUT_SOURCE "{quoted}"')
+    out.append(f'#define CFT_LAYOUT_SOURCE {c_string(source)}')
+    # The include path itself, so that tests can compile their probes against the same headers.
+    out.append('#define CFT_LAYOUT_INCLUDES '
+               + c_string(os.pathsep.join(str(d) for d in includes) if values else ''))
     out.append('#endif  // CFT_ACTION_FASTDDS_LAYOUT_H_')
     (build_temp / LAYOUT_HEADER).write_text('\n'.join(out) + '\n')
     print(f'setup.py: Fast DDS layout from {source}', file=sys.stderr)

@@ -74,6 +74,9 @@ CFT_EXPORT long cft_guard_filter_layout(int which) {
 #endif
 }
 
+// Exported for the layout tests: the include path of the headers the layout came from ("" without).
+CFT_EXPORT const char *cft_guard_layout_includes(void) { return CFT_LAYOUT_INCLUDES; }
+
 // ---- counters (cft_guard_filter_count) -----------------------------------------------------------
 enum {
   C_FAST,          // verdicts given from the uuid bytes

@@ -5,6 +5,7 @@ A ROS session in the test process is :class:`harness.ros.RosSession`.
 
 from __future__ import annotations
 
+import ctypes
 import importlib.metadata
 import os
 import re
@@ -17,6 +18,7 @@ from typing import Any, Callable, Optional, Sequence
 import pytest
 from test_msgs.action import Fibonacci
 
+from cft_action import guard
 from harness.proc import Proc, python_module
 from harness.ros import RosSession
 
@@ -57,23 +59,26 @@ def _started(proc: Proc, ready: str, timeout: float) -> Proc:
 
 
 def fastdds_header_probe(source: str, tmp_path: Path) -> list[int]:
-    """Compile a C++ ``source`` against the installed Fast DDS headers, run it, and return the
-    integers it prints: the layouts that the guard assumes, as the headers define them.
+    """Compile a C++ ``source`` against the Fast DDS headers the guard was built from, run it, and
+    return the integers it prints: the layouts that the guard assumes, as those headers define them.
 
-    Skips the test where there is no C++ compiler or the ROS wheels ship no headers.
+    Skips the test where there is no C++ compiler or the guard was built without headers.
     """
+    library = ctypes.CDLL(guard.library_path(), mode=os.RTLD_LOCAL)
+    library.cft_guard_layout_includes.restype = ctypes.c_char_p
+    includes = [d for d in library.cft_guard_layout_includes().decode().split(os.pathsep) if d]
     compiler = shutil.which('c++') or shutil.which('g++')
-    include = Path(sys.prefix) / 'include'
-    if compiler is None or not (include / 'fastdds').is_dir():
-        pytest.skip('needs a C++ compiler and the Fast DDS headers of the ROS wheels')
+    if compiler is None or not includes:
+        pytest.skip('needs a C++ compiler and a guard built from Fast DDS headers')
     source_file = tmp_path / 'probe.cpp'
     source_file.write_text(source)
     binary = tmp_path / 'probe'
     # Linked to the wheels' Fast DDS for its static constants; the libraries it needs in turn
     # are found at run time through this process's LD_LIBRARY_PATH (ros-wheels-bootstrapper's).
-    subprocess.run([compiler, '-std=c++17', '-Wno-invalid-offsetof', f'-I{include}',
-                    str(source_file), '-o', str(binary), f'-L{Path(sys.prefix) / "lib"}',
-                    '-lfastrtps', '-lfastcdr', '-Wl,--unresolved-symbols=ignore-in-shared-libs'],
+    subprocess.run([compiler, '-std=c++17', '-Wno-invalid-offsetof',
+                    *[f'-I{d}' for d in includes], str(source_file), '-o', str(binary),
+                    f'-L{Path(sys.prefix) / "lib"}', '-lfastrtps', '-lfastcdr',
+                    '-Wl,--unresolved-symbols=ignore-in-shared-libs'],
                    check=True, capture_output=True, timeout=120)
     return [int(v) for v in subprocess.run([str(binary)], check=True, capture_output=True,
                                            text=True, timeout=30).stdout.split()]

@@ -188,7 +188,8 @@ def guard_built_with(layout: dict[str, int], tmp_path: Path) -> Path:
     if compiler is None or not parts:
         pytest.skip("needs a C compiler and the guard's C files")
     header = ['#define CFT_LAYOUT_KNOWN 1',
-              '#define CFT_LAYOUT_SOURCE "a layout made up by tests/test_guard_filter.py"']
+              '#define CFT_LAYOUT_SOURCE "a layout made up by tests/test_guard_filter.py"',
+              '#define CFT_LAYOUT_INCLUDES ""']
     header += [f'#define {name} {value}' for name, value in layout.items()]
     (tmp_path / '_fastdds_layout.h').write_text('\n'.join(header) + '\n')
     library = tmp_path / 'libcftguard_wrong_layout.so'
