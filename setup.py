@@ -63,7 +63,7 @@ def fastdds_include_dirs() -> list[Path]:
             # later candidate (CFT_FASTDDS_INCLUDE=<stack headers>:<venv>/include).
             root = include.parent if include.name == 'fastrtps' else include
             near = [root / 'fastcdr', root / 'foonathan_memory', root]
-            return [include] + [d for d in near + candidates if d.is_dir() and d != include]
+            return list(dict.fromkeys([include] + [d for d in near + candidates if d.is_dir()]))
     return []
 
 
