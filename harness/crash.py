@@ -181,5 +181,22 @@ def machine_line() -> str:
         except metadata.PackageNotFoundError:
             pass
     return (f'{platform.node()}: {os.cpu_count()} CPUs ({cpu}), Linux {platform.release()}, '
-            f'Python {platform.python_version()}, {", ".join(versions)}; '
-            f'load average {os.getloadavg()[0]:.2f} at start')
+            f'Python {platform.python_version()}, {", ".join(versions)}, '
+            f'Fast DDS {fastdds_library()}; load average {os.getloadavg()[0]:.2f} at start')
+
+
+def fastdds_library() -> str:
+    """The real path of the libfastrtps that this process and its children load.
+
+    A run on another stack (``compat/stack_env.sh``) swaps the library, not the wheels' versions
+    that :func:`machine_line` lists, so the line names the file itself.
+    """
+    with open('/proc/self/maps') as maps:
+        for line in maps:
+            if 'libfastrtps.so' in line:
+                return line.split()[-1]
+    for directory in os.environ.get('LD_LIBRARY_PATH', '').split(os.pathsep):
+        candidate = Path(directory or '.') / 'libfastrtps.so.2.14'
+        if directory and candidate.exists():
+            return str(candidate.resolve())
+    return 'not found on LD_LIBRARY_PATH'
