@@ -39,6 +39,7 @@ from typing import Any, Callable, Optional, Sequence
 from cft_action.client import FINISHED_GOAL_GRACE
 from harness import netns
 from harness.capture import CATEGORIES
+from harness.crash import fastdds_library
 from harness.proc import Proc, python_module
 from harness.report import fmt, grid
 
@@ -580,6 +581,7 @@ def environment_facts() -> dict[str, Any]:
     return {'host': platform.node(), 'platform': platform.platform(),
             'python': platform.python_version(), 'cpus': os.cpu_count(), 'cpu_model': cpu,
             'load_average_at_start': os.getloadavg(), 'versions': versions,
+            'fastdds_library': fastdds_library(),
             'rmw': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp (default)')}
 
 
