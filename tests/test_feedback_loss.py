@@ -14,8 +14,8 @@ from test_msgs.action import Fibonacci
 
 from cft_action import guard
 from harness.ros import unique_name
-from tests.support import action_server
-from tests.test_action_client import PERIOD, make_client, result_of, send
+from tests.support import action_server, result_of, send
+from tests.test_action_client import PERIOD, make_client
 
 ORDER = 30   # feedback messages of the one goal: three times rclpy's default depth of 10
 DEFAULT_DEPTH = 10

@@ -23,8 +23,8 @@ from unique_identifier_msgs.msg import UUID
 from cft_action import ActionClient, guard, ParameterEventHandler
 from cft_action.goal_filter import MODES
 from harness.ros import RosSession, unique_name
-from tests.support import action_server, helper_process
-from tests.test_action_client import make_client, PERIOD, result_of, send
+from tests.support import action_server, helper_process, result_of, send
+from tests.test_action_client import make_client, PERIOD
 
 #: The constructor's QoS arguments, as rclpy's test passes them all.
 QOS_ARGUMENTS = ('goal_service_qos_profile', 'result_service_qos_profile',

@@ -14,8 +14,8 @@ from test_msgs.action import Fibonacci
 from cft_action import _native, _rcl, ActionClient
 from cft_action.goal_filter import GoalFilterPlan, TAG_BYTES
 from harness.ros import unique_name
-from tests.support import fastdds_header_probe
-from tests.test_action_client import make_client, result_of, send, start_server
+from tests.support import fastdds_header_probe, result_of, send
+from tests.test_action_client import make_client, start_server
 
 ORDER = 10
 
