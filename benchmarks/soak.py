@@ -233,6 +233,15 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
         state = client.feedback_filter_state
         filter_sets = (1 if state.active or state.updates else 0) + state.updates
         filter_note = state.reason
+        # Where a lost message went: taken from rcl and dropped by the library (feedback_dropped),
+        # or never taken; and whether the DDS reader judged samples itself (filtered_in).
+        report.update({'library_taken': state.feedback_taken,
+                       'library_dropped': state.feedback_dropped,
+                       'filtered_in': state.filtered_in, 'held_goals': state.held_goals,
+                       'arrival_timeouts': state.arrival_timeouts})
+        if lost:  # to replay the filter's verdicts on the goals that lost feedback
+            report.update({'expression': state.expression,
+                           'goal_uuids': [goal[0].hex() for goal in goals]})
     report.update({
         'finished': finished, 'goals': len(goals), 'no_result': no_result,
         'rejected': rejected, 'canceled': canceled, 'published': published, 'lost': lost,
