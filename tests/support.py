@@ -62,14 +62,15 @@ def fastdds_header_probe(source: str, tmp_path: Path) -> list[int]:
     """Compile a C++ ``source`` against the Fast DDS headers the guard was built from, run it, and
     return the integers it prints: the layouts that the guard assumes, as those headers define them.
 
-    Skips the test where there is no C++ compiler or the guard was built without headers.
+    Skips the test where there is no C++ compiler, or no headers that the guard was built from.
     """
     library = ctypes.CDLL(guard.library_path(), mode=os.RTLD_LOCAL)
     library.cft_guard_layout_includes.restype = ctypes.c_char_p
     includes = [d for d in library.cft_guard_layout_includes().decode().split(os.pathsep) if d]
     compiler = shutil.which('c++') or shutil.which('g++')
-    if compiler is None or not includes:
-        pytest.skip('needs a C++ compiler and a guard built from Fast DDS headers')
+    if compiler is None or not includes or not Path(includes[0]).is_dir():
+        # (a build in pip's isolated environment may have taken headers that are gone since)
+        pytest.skip('needs a C++ compiler and the Fast DDS headers the guard was built from')
     source_file = tmp_path / 'probe.cpp'
     source_file.write_text(source)
     binary = tmp_path / 'probe'
