@@ -62,14 +62,19 @@ def fastdds_header_probe(source: str, tmp_path: Path) -> list[int]:
     """Compile a C++ ``source`` against the Fast DDS headers the guard was built from, run it, and
     return the integers it prints: the layouts that the guard assumes, as those headers define them.
 
-    Skips the test where there is no C++ compiler, or no headers that the guard was built from.
+    Skips the test where there is no C++ compiler, or no Fast DDS headers to compile against.
     """
     library = ctypes.CDLL(guard.library_path(), mode=os.RTLD_LOCAL)
     library.cft_guard_layout_includes.restype = ctypes.c_char_p
-    includes = [d for d in library.cft_guard_layout_includes().decode().split(os.pathsep) if d]
+    recorded = [d for d in library.cft_guard_layout_includes().decode().split(os.pathsep) if d]
+    # A first install into a fresh venv builds in pip's isolated environment, whose copy of the
+    # wheels' headers is gone since; the same wheel's headers are then in this venv, which the
+    # build listed after it (or, if it did not, sys.prefix/include). Headers of another build
+    # than the guard's would make the comparison fail, not pass.
+    includes = [d for d in recorded if Path(d).is_dir()] or [str(Path(sys.prefix) / 'include')]
     compiler = shutil.which('c++') or shutil.which('g++')
-    if compiler is None or not includes or not Path(includes[0]).is_dir():
-        # (a build in pip's isolated environment may have taken headers that are gone since)
+    if compiler is None or not recorded or not any(
+            (Path(d) / 'fastrtps' / 'config.h').is_file() for d in includes):
         pytest.skip('needs a C++ compiler and the Fast DDS headers the guard was built from')
     source_file = tmp_path / 'probe.cpp'
     source_file.write_text(source)
