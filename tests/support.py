@@ -19,6 +19,7 @@ import pytest
 from test_msgs.action import Fibonacci
 
 from cft_action import guard
+from harness.crash import fastdds_library
 from harness.proc import Proc, python_module
 from harness.ros import RosSession
 
@@ -96,17 +97,14 @@ def loaded_fastdds_version() -> Optional[tuple[int, int, int]]:
     From the file's real name (a stack's ``libfastrtps.so.2.14.6``), or, for the ROS wheels' copy
     in this venv (named only ``libfastrtps.so.2.14``), from the ``ros-fastrtps`` wheel's version.
     """
-    with open('/proc/self/maps') as maps:
-        paths = {line.split()[-1] for line in maps if 'libfastrtps.so' in line}
-    for path in paths:
-        real = os.path.realpath(path)
-        match = re.search(r'libfastrtps\.so\.(\d+)\.(\d+)\.(\d+)$', real)
-        if match is None and Path(real).parent == Path(sys.prefix, 'lib').resolve():
-            match = re.match(r'(\d+)\.(\d+)\.(\d+)', importlib.metadata.version('ros-fastrtps'))
-        if match is not None:
-            major, minor, micro = (int(v) for v in match.groups())
-            return major, minor, micro
-    return None
+    real = os.path.realpath(fastdds_library())
+    match = re.search(r'libfastrtps\.so\.(\d+)\.(\d+)\.(\d+)$', real)
+    if match is None and Path(real).parent == Path(sys.prefix, 'lib').resolve():
+        match = re.match(r'(\d+)\.(\d+)\.(\d+)', importlib.metadata.version('ros-fastrtps'))
+    if match is None:
+        return None
+    major, minor, micro = (int(v) for v in match.groups())
+    return major, minor, micro
 
 
 def round_trip(ros: RosSession, client: Any, tries: int = 10,
