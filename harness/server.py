@@ -37,7 +37,9 @@ watcher then has the counters from just before a crash). The JSON holds ``t`` (m
 accepted), ``released`` (seconds from the start of the server until ``--hold-goals`` let the goals
 go, or null), ``release_reason``, ``maxrss_kb`` (this process's peak resident set),
 ``goal_requests``, ``goal_responses`` and ``goal_response_errors`` (goal requests taken from rcl,
-goal responses sent, and sends that failed: rclpy logs those and drops the goal),
+goal responses sent, and sends that failed: rclpy logs those and drops the goal, or that rmw
+dropped because the client's response reader was not matched within 100 ms, which rclpy only
+warns of while the goal runs),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
 line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and ``guard_filter_class`` (its call,
@@ -57,6 +59,7 @@ import resource
 import sys
 import threading
 import time
+import warnings
 from typing import Any, Optional
 
 import rclpy
@@ -96,6 +99,9 @@ def queue_kwargs(depth: Optional[str], side: str = 'pub') -> dict[str, QoSProfil
 
 #: The warning with which rclpy's ActionServer drops a goal whose response it could not send.
 _SEND_FAILED = 'Failed to send goal response'
+#: rclpy's RuntimeWarning when rmw_fastrtps dropped a response because the client's response reader
+#: was not matched within the writer's max_blocking_time (100 ms): the client never gets it.
+_RESPONSE_TIMED_OUT = 'failed to send response (timeout)'
 
 
 class _CountingLogger:
@@ -127,6 +133,17 @@ class CountingActionServer(ActionServer):
         self._failed_send = threading.local()
         super().__init__(*args, **kwargs)
         self._logger = _CountingLogger(self._logger, self._note_failed_send)
+        # Every such warning, not only the first from its line (the default filter), is counted
+        # and printed: each is a goal that its client will never hear of.
+        warnings.filterwarnings('always', message=_RESPONSE_TIMED_OUT, category=RuntimeWarning)
+        shown = warnings.showwarning
+
+        def count_timed_out(message: Any, category: Any, *args: Any, **kwargs: Any) -> None:
+            if str(message).startswith(_RESPONSE_TIMED_OUT):
+                self._note_failed_send()
+            shown(message, category, *args, **kwargs)
+
+        warnings.showwarning = count_timed_out
 
     def take_data(self) -> dict:
         """Take as rclpy does, and note when a goal request left rmw's queue."""

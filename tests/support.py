@@ -19,7 +19,7 @@ import pytest
 from test_msgs.action import Fibonacci
 
 from cft_action import guard
-from harness.crash import fastdds_library
+from harness.crash import fastdds_library, live_backtrace
 from harness.proc import Proc, python_module
 from harness.ros import RosSession
 
@@ -125,6 +125,21 @@ def round_trip(ros: RosSession, client: Any, tries: int = 10,
         if (wait or ros.spin_until)(future.done, 2):
             return future.result().accepted
     return False
+
+
+def server_evidence(server: Proc) -> str:
+    """What a server was doing when a client's goals went unanswered, for an assertion's message.
+
+    Its output, its goal-request counters (did requests reach it, did its responses fail to go
+    out) and, from gdb, what each of its threads was doing: the evidence of a one-off failure
+    that a rerun would not show.
+    """
+    try:
+        stats = server.request('stats', 'STATS', timeout=10)
+    except TimeoutError as error:
+        stats = f'(no STATS in 10 s: {error})'
+    threads = live_backtrace(server.pid, frames=12) if server.poll() is None else None
+    return f'{server.tail()}\n{stats}\n--- threads ---\n{threads}'
 
 
 def send(ros: RosSession, client: Any, order: int, **kwargs: Any) -> Any:

@@ -23,7 +23,7 @@ from cft_action.client import FINISHED_GOAL_GRACE
 from cft_action.filters import NEVER_MATCH
 from harness.polling import wait_until
 from harness.ros import RosSession, unique_name
-from tests.support import action_server, helper_process, result_of, round_trip, send
+from tests.support import action_server, helper_process, result_of, round_trip, send, server_evidence
 
 PERIOD = 0.01  # 100 Hz feedback per goal
 
@@ -332,7 +332,7 @@ def test_destroy(ros, server):
 
 
 def test_multithreaded_executor_with_goals_sent_from_another_thread(server):
-    action, _ = server
+    action, server_proc = server
     ros = RosSession(MultiThreadedExecutor, num_threads=4)
     spinner = threading.Thread(target=ros.executor.spin, daemon=True)
     spinner.start()
@@ -346,7 +346,7 @@ def test_multithreaded_executor_with_goals_sent_from_another_thread(server):
                               feedback_sub_qos_profile=deep)
         assert client.wait_for_server(timeout_sec=20)
         # send_goal waits for ever on a goal response that was lost: prove the service first.
-        assert round_trip(ros, client, wait=wait_until), 'the server never answered a goal'
+        assert round_trip(ros, client, wait=wait_until), server_evidence(server_proc)
         lock = threading.Lock()
         received: dict[int, list[int]] = {}
 

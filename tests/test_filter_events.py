@@ -15,7 +15,7 @@ from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient, guard
 from harness.ros import unique_name
-from tests.support import action_server, result_of, round_trip, send
+from tests.support import action_server, result_of, round_trip, send, server_evidence
 
 
 def compiled(child) -> int:
@@ -28,7 +28,7 @@ def test_client_mode_changes_its_filter_only_for_an_untagged_caller_uuid(ros):
     try:
         client = ActionClient(ros.node, Fibonacci, action)
         assert client.wait_for_server(timeout_sec=20)
-        assert round_trip(ros, client)
+        assert round_trip(ros, client), server_evidence(child)
         # The reader's one filter, created with the client, reaches the writer once.
         assert ros.spin_until(lambda: compiled(child) >= 1, timeout=20)
         created = compiled(child)
