@@ -43,7 +43,8 @@ warns of while the goal runs),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
 line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and ``guard_filter_class`` (its call,
-filter-verdict, writer-limit and filter-class counters) and ``writers`` (the GUIDs of the feedback and status writers, in hex).
+filter-verdict, writer-limit and filter-class counters) and ``writers`` (the GUIDs of the
+feedback and status writers, in hex).
 ``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
 by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). The command
 ``release`` ends ``--hold-goals``. End of input stops the server.
