@@ -242,6 +242,12 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
         if lost:  # to replay the filter's verdicts on the goals that lost feedback
             report.update({'expression': state.expression,
                            'goal_uuids': [goal[0].hex() for goal in goals]})
+    if lost:  # to look it up among the readers that the server knew of when it took each goal
+        feedback_topic = node.resolve_topic_name(action) + '/_action/feedback'
+        report['reader_gids'] = [
+            bytes(info.endpoint_gid[:16]).hex()
+            for info in node.get_subscriptions_info_by_topic(feedback_topic)
+            if info.node_name == node.get_name()]
     report.update({
         'finished': finished, 'goals': len(goals), 'no_result': no_result,
         'rejected': rejected, 'canceled': canceled, 'published': published, 'lost': lost,
@@ -296,6 +302,7 @@ class Soak:
         if was_alive:
             server.send('stats')
             server.wait_for('STATS', 5.0, after=len(server.lines))
+            self.note_readers_of_lost_goals(server)
         stats = [stats_of(line) for line in server.all('STATS')]
         stats = [s for s in stats if s]
         server.stop()
@@ -316,6 +323,23 @@ class Soak:
         if not self.opts.keep_cores:
             shutil.rmtree(self.server_dir, ignore_errors=True)
         return info
+
+    def note_readers_of_lost_goals(self, server: Proc) -> None:
+        """For each life that lost feedback: whether the server's graph showed the life's reader
+        when it took each goal (``reader_known_at_take``, by goal UUID), or None if not recorded."""
+        with self.lock:
+            lossy = [life for life in self.lives if life.get('reader_gids')]
+        if not lossy:
+            return
+        after = len(server.lines)
+        server.send('readers')
+        line = server.wait_for('READERS', 10.0, after=after)
+        readers = json.loads(line.split(' ', 1)[1]) if line else {}
+        for life in lossy:
+            own = set(life['reader_gids'])
+            life['reader_known_at_take'] = {
+                goal: (bool(own & set(readers[goal])) if goal in readers else None)
+                for goal in life.get('goal_uuids', [])}
 
     def life(self, slot: int, n: int) -> None:
         o = self.opts
@@ -362,7 +386,7 @@ class Soak:
         end = t0 + o.minutes * 60
         slots = [threading.Thread(target=self.slot_loop, args=(slot, end), daemon=True)
                  for slot in range(o.clients)]
-        for i, thread in enumerate(slots):
+        for thread in slots:
             thread.start()
             time.sleep(0.25)  # staggered starts
         last_alive = time.monotonic()

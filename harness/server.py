@@ -46,7 +46,9 @@ line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and ``guard_filter_c
 filter-verdict, writer-limit and filter-class counters) and ``writers`` (the GUIDs of the
 feedback and status writers, in hex).
 ``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
-by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). The command
+by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). ``READERS <json>``
+replies to ``readers``: per goal UUID in hex, the GIDs (hex) of the feedback readers in this
+server's graph when it took the goal's request. The command
 ``release`` ends ``--hold-goals``. End of input stops the server.
 """
 
@@ -130,9 +132,13 @@ class CountingActionServer(ActionServer):
         self.request_lock = threading.Lock()
         self.requests: dict[str, str] = {}  # goal UUID (hex) -> 'taken', 'sent' or 'failed'
         self.takes: list[tuple[str, float]] = []  # (goal UUID (hex), time.monotonic()) per take
+        # goal UUID (hex) -> the feedback readers that this server's graph showed when it took the
+        # goal request, as GID hex: whether a client's reader was discovered before its goal ran.
+        self.readers_at_take: dict[str, list[str]] = {}
         self.counts = {'goal_requests': 0, 'goal_responses': 0, 'goal_response_errors': 0}
         self._failed_send = threading.local()
         super().__init__(*args, **kwargs)
+        self._feedback_topic = self._node.resolve_topic_name(args[2]) + '/_action/feedback'
         self._logger = _CountingLogger(self._logger, self._note_failed_send)
         # Every such warning, not only the first from its line (the default filter), is counted
         # and printed: each is a goal that its client will never hear of.
@@ -160,7 +166,10 @@ class CountingActionServer(ActionServer):
 
     async def _execute_goal_request(self, request_header_and_message: Any) -> None:
         key = bytes(request_header_and_message[1].goal_id.uuid).hex()
+        readers = [bytes(info.endpoint_gid[:16]).hex() for info in
+                   self._node.get_subscriptions_info_by_topic(self._feedback_topic)]
         with self.request_lock:
+            self.readers_at_take[key] = readers
             self.counts['goal_requests'] += 1
             self.requests[key] = 'taken'
         # The response is sent before the coroutine's first await that can suspend it (the goal
@@ -405,6 +414,11 @@ def main(argv: list[str]) -> None:
                 states = json.dumps(server.server.requests)
             with out:
                 print('REQUESTS ' + states, flush=True)
+        elif line.strip() == 'readers':
+            with server.server.request_lock:
+                readers = json.dumps(server.server.readers_at_take)
+            with out:
+                print('READERS ' + readers, flush=True)
         elif line.strip() == 'takes':
             with server.server.request_lock:
                 takes = json.dumps(server.server.takes)
