@@ -240,9 +240,9 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
                        'filtered_in': state.filtered_in, 'held_goals': state.held_goals,
                        'arrival_timeouts': state.arrival_timeouts})
         if lost:  # to replay the filter's verdicts on the goals that lost feedback
-            report.update({'expression': state.expression,
-                           'goal_uuids': [goal[0].hex() for goal in goals]})
+            report['expression'] = state.expression
     if lost:  # to look it up among the readers that the server knew of when it took each goal
+        report['goal_uuids'] = [goal[0].hex() for goal in goals]
         feedback_topic = node.resolve_topic_name(action) + '/_action/feedback'
         report['reader_gids'] = [
             bytes(info.endpoint_gid[:16]).hex()
