@@ -25,13 +25,14 @@ import datetime
 import json
 import os
 import platform
-import random
 import time
 import uuid
 from pathlib import Path
 
+from harness.domain import unused_domain
+
 REPO = Path(__file__).resolve().parent.parent
-os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 101)))
+os.environ.setdefault('ROS_DOMAIN_ID', str(unused_domain()))
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
 from cft_action import guard  # noqa: E402

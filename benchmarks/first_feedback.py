@@ -42,6 +42,7 @@ from unique_identifier_msgs.msg import UUID
 from cft_action import guard
 from harness import client as load_client
 from harness import load
+from harness.domain import unused_domain
 from harness.proc import Proc, python_module
 
 REPO = Path(__file__).resolve().parent.parent
@@ -119,7 +120,7 @@ def main() -> None:
     parser.add_argument('--uuids', choices=('generated', 'caller'), default='generated',
                         help="who chooses the goal UUIDs: the client, or the caller (goal_uuid=)")
     args = parser.parse_args()
-    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 101)))
+    os.environ.setdefault('ROS_DOMAIN_ID', str(unused_domain()))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     rclpy.init()
     action = f'/first_feedback_{random.randrange(1 << 32):08x}'

@@ -16,8 +16,8 @@ that is visible from rclpy:
 
 Guard ``on`` preloads the guard into the publisher, and into both ping and pong; the sink is never
 guarded. The two configurations alternate within each of ``--reps`` repetitions, so that a change
-in the machine's load hits both. Every process has a random ROS domain (1..101) and localhost-only
-discovery; every wait is bounded.
+in the machine's load hits both. Every process has a ROS domain that no other process on the host
+uses, and localhost-only discovery; every wait is bounded.
 
     python -m benchmarks.guard_overhead --reps 5
 """
@@ -28,7 +28,6 @@ import argparse
 import datetime
 import json
 import os
-import random
 import shutil
 import statistics
 import subprocess
@@ -41,6 +40,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from harness.crash import machine_line, plain_env, server_env
+from harness.domain import unused_domain
 from harness.proc import Proc, main_or_role, python_module
 from harness.report import say
 
@@ -266,7 +266,7 @@ def env_for(domain: int, guarded: bool) -> dict[str, str]:
 
 
 def throughput_once(guarded: bool, opts: argparse.Namespace) -> dict[str, Any]:
-    domain, topic = random.randint(1, 101), f'ovh_{uuid.uuid4().hex[:8]}'
+    domain, topic = unused_domain(), f'ovh_{uuid.uuid4().hex[:8]}'
     role = python_module('benchmarks.guard_overhead', '_role')
     sink = Proc('sink', [*role, 'sink', topic, '120'], plain_env(domain))
     pub = None
@@ -293,7 +293,7 @@ def throughput_once(guarded: bool, opts: argparse.Namespace) -> dict[str, Any]:
 
 
 def latency_once(guarded: bool, opts: argparse.Namespace) -> dict[str, Any]:
-    domain = random.randint(1, 101)
+    domain = unused_domain()
     there, back = f'ovh_ping_{uuid.uuid4().hex[:8]}', f'ovh_pong_{uuid.uuid4().hex[:8]}'
     role = python_module('benchmarks.guard_overhead', '_role')
     pong = Proc('pong', [*role, 'pong', there, back, '120'], env_for(domain, guarded))

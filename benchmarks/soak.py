@@ -31,8 +31,9 @@ Reported per configuration:
 - **foreign feedback**: messages the client took whose goal is not one of its own.
 
 Feedback is counted where rclpy takes it from rcl (``take_data``), not in callbacks, so the three
-modes are measured alike. Every process has one random ROS domain (1..101) per configuration and
-localhost-only discovery; every wait is bounded.
+modes are measured alike. Every process has one ROS domain per configuration, one that
+no other process on the host uses (harness.domain), and localhost-only discovery; every wait is
+bounded.
 
     python -m benchmarks.soak                         # 10 minutes per configuration, 6 of them
     python -m benchmarks.soak --minutes 2 --modes client goals --guard on
@@ -57,6 +58,7 @@ from typing import Any, Optional
 
 from harness.crash import (alive, core_backtrace, crash_site, machine_line, plain_env,
                            server_command, server_env, signal_name, stats_of)
+from harness.domain import unused_domain
 from harness.proc import Proc, main_or_role, python_module
 from harness.report import say
 from harness.server import queue_kwargs
@@ -274,7 +276,7 @@ class Soak:
 
     def __init__(self, mode: str, guarded: bool, opts: argparse.Namespace) -> None:
         self.mode, self.guarded, self.opts = mode, guarded, opts
-        self.domain = random.randint(1, 101)
+        self.domain = unused_domain()
         self.action = f'soak_{uuid.uuid4().hex[:10]}'
         self.lock = threading.Lock()
         self.lives: list[dict[str, Any]] = []

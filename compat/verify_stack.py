@@ -22,11 +22,12 @@ cft_action code: it tests the stack, not the library.
 from __future__ import annotations
 
 import os
-import random
 import subprocess
 import sys
 import time
 from pathlib import Path
+
+from harness.domain import unused_domain
 
 ACTION = f'/compat_verify_{os.getpid()}'
 ORDER = 5
@@ -78,7 +79,7 @@ def main() -> int:
         libdir = str(Path(sys.prefix, 'lib').resolve())
     else:
         libdir = str(Path(stack, 'install', 'lib').resolve())
-    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 101)))
+    os.environ.setdefault('ROS_DOMAIN_ID', str(unused_domain()))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     failed = []
 

@@ -32,12 +32,13 @@ import argparse
 import json
 import os
 import queue
-import random
 import subprocess
 import sys
 import threading
 import time
 from typing import Optional, Union
+
+from harness.domain import unused_domain
 
 NODES = 20
 RATE_HZ = 10.0
@@ -243,7 +244,7 @@ def main() -> None:
     if args.handler:
         return run_handler(args.handler[0], args.handler[1:-1], args.handler[-1])
 
-    os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 101)))
+    os.environ.setdefault('ROS_DOMAIN_ID', str(unused_domain()))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     watched = [node_name(i) for i in WATCHED]
     extra = node_name(0)

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import random
 import shutil
 import sys
 import tempfile
@@ -23,6 +22,7 @@ from typing import Any, Callable, Optional
 
 from harness.crash import (alive, core_backtrace, plain_env, server_command, server_env,
                            signal_name, stats_of)
+from harness.domain import unused_domain
 from harness.proc import Proc, python_module, run_role
 from harness.report import say
 from harness.server import HEADER
@@ -196,10 +196,10 @@ class Cell:
 def run_cell(cell: Cell, opts: argparse.Namespace, domain: Optional[int] = None) -> dict[str, Any]:
     """Run one cell and return what happened. Asserts nothing; never retries.
 
-    ``opts`` needs ``interval``, ``settle``, ``k`` and ``keep_cores``; ``domain`` is random
-    (1..101) unless given.
+    ``opts`` needs ``interval``, ``settle``, ``k`` and ``keep_cores``; ``domain`` is an unused one
+    (:func:`harness.domain.unused_domain`) unless given.
     """
-    domain = domain or random.randint(1, 101)
+    domain = domain or unused_domain()
     action = f'hz_{uuid.uuid4().hex[:10]}'
     workdir = tempfile.mkdtemp(prefix='cft_hazard_')
     started: list[Proc] = []

@@ -31,7 +31,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import platform
-import random
 import statistics
 import time
 from typing import Any, Callable, Optional, Sequence
@@ -40,6 +39,7 @@ from cft_action.client import FINISHED_GOAL_GRACE
 from harness import netns
 from harness.capture import CATEGORIES
 from harness.crash import fastdds_library
+from harness.domain import unused_domain
 from harness.proc import Proc, python_module
 from harness.report import fmt, grid
 
@@ -197,8 +197,7 @@ class LoadRun:
         if reason is not None and spec.network == 'netns':
             raise RuntimeError(f'network namespaces are not available: {reason}')
         self.env = dict(os.environ)
-        self.env['ROS_DOMAIN_ID'] = os.environ.get('CFT_LOAD_DOMAIN_ID') or \
-            str(random.randint(1, 101))
+        self.env['ROS_DOMAIN_ID'] = os.environ.get('CFT_LOAD_DOMAIN_ID') or str(unused_domain())
         self.env.pop('CFT_ACTION_FEEDBACK_FILTER', None)  # each phase sets its own mode
         if reason is None:
             netns.remove_stale()

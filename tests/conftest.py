@@ -1,11 +1,13 @@
 """Session set-up: an isolated ROS domain, localhost-only discovery, and process hygiene."""
 
 import os
-import random
 import signal
 
-# Set before rclpy creates any context, and inherited by every process the tests start.
-os.environ['ROS_DOMAIN_ID'] = os.environ.get('CFT_TEST_DOMAIN_ID') or str(random.randint(1, 101))
+from harness.domain import unused_domain  # no ROS import: the domain must come first
+
+# Set before rclpy creates any context, and inherited by every process the tests start: a domain
+# that no other process on this host uses, unless one is given.
+os.environ['ROS_DOMAIN_ID'] = os.environ.get('CFT_TEST_DOMAIN_ID') or str(unused_domain())
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 os.environ.pop('CFT_ACTION_FEEDBACK_FILTER', None)
 
@@ -16,9 +18,9 @@ os.environ.pop('CFT_ACTION_FEEDBACK_FILTER', None)
 if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
 
-import pytest  # noqa: E402
+import pytest
 
-from harness.ros import RosSession  # noqa: E402
+from harness.ros import RosSession
 
 
 @pytest.fixture
@@ -29,3 +31,8 @@ def ros():
         yield session
     finally:
         session.close()
+
+
+def pytest_report_header(config):
+    """The session's domain, so that a failure can be matched with the other processes on it."""
+    return f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} (LOCALHOST discovery)"

@@ -17,7 +17,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import random
 import shutil
 import subprocess
 import sys
@@ -27,8 +26,10 @@ from typing import Iterator
 
 import pytest
 
+from harness.domain import unused_domain
+
 # A session conftest normally sets these; on its own this module still gets a domain of its own.
-os.environ.setdefault('ROS_DOMAIN_ID', str(random.randint(1, 101)))
+os.environ.setdefault('ROS_DOMAIN_ID', str(unused_domain()))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 from cft_action import guard  # noqa: E402
