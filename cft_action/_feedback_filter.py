@@ -77,11 +77,11 @@ class FeedbackFilter:
     def watch(self, goal_uuid: bytes) -> int:
         """Match this goal's feedback, growing the filter if it must.
 
-        :return: The version of the filter that first matched the goal; 0 when the installed
-            filter does, or when there is no filter.
+        :return: The version of the filter that first matched the goal: 0 when the installed filter
+            does; -1 when there is no filter, so nothing to wait for.
         """
         if self.plan is None:
-            return 0
+            return -1
         if self.plan.watch(goal_uuid):
             if self.plan.mode == 'client' and not self._logged_explicit_uuid:
                 self._logged_explicit_uuid = True
@@ -90,7 +90,7 @@ class FeedbackFilter:
                     'costs a filter update at the server; ActionClient.new_goal_uuid() avoids it')
             self._update(self.plan.grow)
         matched = self.plan.revision_matching(goal_uuid) if self.plan is not None else None
-        return matched or 0
+        return -1 if matched is None else matched
 
     def release(self, goal_uuids: list[bytes], idle: bool) -> bool:
         """Drop the terms of released goals; shrink once ``idle``.

@@ -43,7 +43,7 @@ def cancel_goal_probe(service_name: str, qos_profile: QoSProfile) -> dict[bytes,
 class HeldGoal(NamedTuple):
     """A goal request held until the filter version it needs has reached the server."""
 
-    version: int  # the filter version it needs; 0: none, it only keeps its place in the order
+    version: int  # the filter version it needs; -1: none, it only keeps its place in the order
     goal: Any
     feedback_callback: Optional[Callable]
     goal_uuid: UUID
@@ -99,8 +99,8 @@ class HeldGoals:
         return tuple(self._queue)
 
     def needed(self) -> int:
-        """The latest version that a held request waits for; 0 when none waits."""
-        return max((held.version for held in self._queue), default=0)
+        """The latest version that a held request waits for; -1 when none waits."""
+        return max((held.version for held in self._queue), default=-1)
 
     def must_hold(self, version: int, writer_is_remote: Callable[[], bool]) -> bool:
         """Whether a request that needs ``version`` waits: behind others, or for a proof."""
@@ -138,9 +138,9 @@ class HeldGoals:
                 if self._gate.timeouts == 1:
                     self._logger.warning(
                         f'the action server did not answer {self._probed_service} within '
-                        f'{self._timeout:g} s, so the arrival of a filter update is not '
-                        'proven: held goals are sent without it, and the first feedback that the '
-                        'server publishes for them may be lost')
+                        f'{self._timeout:g} s, so that its feedback writer has this client\'s '
+                        'feedback filter is not proven: held goals are sent without it, and the '
+                        'first feedback that the server publishes for them may be lost')
                 self._release(self.needed())
             if self._queue:
                 self._begin()

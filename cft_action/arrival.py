@@ -239,8 +239,12 @@ class ArrivalGate:
     """Which versions of a reader's filter the writers of other processes are proven to apply.
 
     A version is the reader's update count (``FilteredReader.updates``): 0 is the filter the reader
-    was created with, which a writer receives with the match itself and so needs no proof; version
-    ``n`` is proven by a proof begun after the ``n``-th update.
+    was created with, which a writer receives with the match itself; version ``n`` is proven by a
+    proof begun after the ``n``-th update. Whether a writer has matched the reader at all needs a
+    proof too where the reader was announced after the endpoints that show the writer's process
+    ready (``proven=-1``): the action client's feedback reader, which rmw_fastrtps recreates with
+    the first filter, after the goal service's endpoints, so that a goal round trip does not prove
+    that the server's feedback writer has it yet.
 
     Its owner serializes the calls (it holds its reader's lock), except :meth:`wait`, which takes
     ``lock`` only to record the outcome.
@@ -248,13 +252,15 @@ class ArrivalGate:
     :param node: The node whose participant changed the filter.
     :param targets: The participants to hear from, and their services.
     :param lock: The owner's lock.
+    :param proven: The latest version taken as proven at the start: 0, or -1 until a proof of the
+        reader itself.
     """
 
-    def __init__(self, node: Node, targets: Targets, lock: Any) -> None:
+    def __init__(self, node: Node, targets: Targets, lock: Any, *, proven: int = 0) -> None:
         self._node = node
         self._targets = targets
         self._lock = lock
-        self._confirmed = 0
+        self._confirmed = proven
         self._proof: Optional[ArrivalProof] = None
         self.timeouts = 0
 

@@ -20,6 +20,7 @@ rclpy's contract.
 from __future__ import annotations
 
 import os
+import time
 from typing import Any, Callable, NamedTuple, Optional
 
 from action_msgs.msg import GoalStatus
@@ -212,7 +213,9 @@ class ActionClient(CompatActionClient):
         self._feedback_writers = RemotePublishers(node, feedback_topic, [feedback_topic])
         cancel_service = f'{self._resolved_action_name}/_action/cancel_goal'
         probe = cancel_goal_probe(cancel_service, self._cancel_qos)
-        self._arrival = ArrivalGate(node, lambda: probe, lock)
+        # The feedback reader is recreated with the first filter, after the goal service's
+        # endpoints: until a proof, a goal round trip does not show that the server has it.
+        self._arrival = ArrivalGate(node, lambda: probe, lock, proven=-1)
         self._held_goals = HeldGoals(
             node, self.callback_group, self._arrival, lock, super().send_goal_async,
             lambda: self._reader.updates, self._cft_logger, cancel_service,
@@ -261,8 +264,10 @@ class ActionClient(CompatActionClient):
         When the filter must grow to match this goal, it grows before the request is sent, and
         the request is held until the server's cancel service, asked from a client created after
         the growth, has replied: discovery is ordered, so the feedback writer then has the new
-        filter, and the feedback that the server publishes at once is not filtered out. Requests
-        are sent in the order of the calls.
+        filter, and the feedback that the server publishes at once is not filtered out. The first
+        goal with a feedback callback is held the same way until the server is proven to have this
+        client's feedback reader at all, unless :meth:`wait_for_server` proved it. Requests are
+        sent in the order of the calls.
 
         :param goal: The goal request.
         :type goal: action_type.Goal
@@ -285,7 +290,7 @@ class ActionClient(CompatActionClient):
             if goal_uuid is None:
                 raw = self._filter.uuid_for(feedback_callback is not None)
                 goal_uuid = None if raw is None else UUID(uuid=list(raw))
-            version = 0
+            version = -1  # a goal without feedback waits for no proof
             if goal_uuid is not None and feedback_callback is not None:
                 self._finished_goals.sent(bytes(goal_uuid.uuid))
                 version = self._filter.watch(bytes(goal_uuid.uuid))
@@ -294,6 +299,35 @@ class ActionClient(CompatActionClient):
                 return self._held_goals.hold(HeldGoal(version, goal, feedback_callback, goal_uuid,
                                                       Future()))
             return super().send_goal_async(goal, feedback_callback, goal_uuid)
+
+    def wait_for_server(self, timeout_sec: Optional[float] = None) -> bool:
+        """
+        Wait for an action sever to be ready.
+
+        Returns as soon as an action server is ready for this client: as rclpy, once the server's
+        services are available; with a feedback filter, also once the server's feedback writer is
+        proven to have this client's feedback reader (a reply of its cancel service, as for a held
+        goal), waiting for that at most ``FILTER_ARRIVAL_TIMEOUT`` seconds and within
+        ``timeout_sec``. A goal sent before that proof would be held until it.
+
+        :param timeout_sec: Number of seconds to wait until an action server is available.
+            If None, then wait indefinitely.
+        :return: True if an action server is available, False if the timeout is exceeded.
+        """
+        started = time.monotonic()
+        if not super().wait_for_server(timeout_sec=timeout_sec):
+            return False
+        with self._reader.lock:
+            unproven = (self._filter.plan is not None and not self._arrival.is_confirmed(0)
+                        and self._feedback_writers.any())
+        if unproven:
+            left = FILTER_ARRIVAL_TIMEOUT
+            if timeout_sec is not None and timeout_sec >= 0:
+                left = min(left, max(0.0, timeout_sec - (time.monotonic() - started)))
+            if not self._arrival.wait(0, left):
+                self._cft_logger.debug('wait_for_server: the server did not prove that it has '
+                                       'the feedback reader in time; the first goal will be held')
+        return True
 
     def destroy(self) -> None:
         """Destroy the underlying action client handle."""

@@ -48,7 +48,8 @@ feedback and status writers, in hex).
 ``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
 by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). ``READERS <json>``
 replies to ``readers``: per goal UUID in hex, the GIDs (hex) of the feedback readers in this
-server's graph when it took the goal's request. The command
+server's graph when it took the goal's request; ``READERS_NOW <json>`` to ``readers now``, those
+in its graph now. The command
 ``release`` ends ``--hold-goals``. End of input stops the server.
 """
 
@@ -138,7 +139,7 @@ class CountingActionServer(ActionServer):
         self.counts = {'goal_requests': 0, 'goal_responses': 0, 'goal_response_errors': 0}
         self._failed_send = threading.local()
         super().__init__(*args, **kwargs)
-        self._feedback_topic = self._node.resolve_topic_name(args[2]) + '/_action/feedback'
+        self.feedback_topic = self._node.resolve_topic_name(args[2]) + '/_action/feedback'
         self._logger = _CountingLogger(self._logger, self._note_failed_send)
         # Every such warning, not only the first from its line (the default filter), is counted
         # and printed: each is a goal that its client will never hear of.
@@ -167,7 +168,7 @@ class CountingActionServer(ActionServer):
     async def _execute_goal_request(self, request_header_and_message: Any) -> None:
         key = bytes(request_header_and_message[1].goal_id.uuid).hex()
         readers = [bytes(info.endpoint_gid[:16]).hex() for info in
-                   self._node.get_subscriptions_info_by_topic(self._feedback_topic)]
+                   self._node.get_subscriptions_info_by_topic(self.feedback_topic)]
         with self.request_lock:
             self.readers_at_take[key] = readers
             self.counts['goal_requests'] += 1
@@ -419,6 +420,12 @@ def main(argv: list[str]) -> None:
                 readers = json.dumps(server.server.readers_at_take)
             with out:
                 print('READERS ' + readers, flush=True)
+        elif line.strip() == 'readers now':
+            topic = server.server.feedback_topic
+            with out:
+                print('READERS_NOW ' + json.dumps([bytes(info.endpoint_gid[:16]).hex() for info in
+                                                   node.get_subscriptions_info_by_topic(topic)]),
+                      flush=True)
         elif line.strip() == 'takes':
             with server.server.request_lock:
                 takes = json.dumps(server.server.takes)

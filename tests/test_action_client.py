@@ -262,6 +262,42 @@ def test_a_held_goal_waits_from_the_first_spin_not_from_the_call(ros, server, mo
     assert (state.held_goals, state.arrival_timeouts, state.confirmed) == (1, 0, True), state
 
 
+@pytest.mark.parametrize('mode', ['client', 'goals'])
+def test_the_first_goal_waits_for_proof_that_the_server_has_the_reader(ros, server, mode):
+    """The feedback reader is recreated with the first filter, after the goal service's endpoints:
+    a caller that only saw the server ready, without wait_for_server, has its first goal held
+    until the server's cancel service proves that the feedback writer has the reader."""
+    action, _ = server
+    client = ActionClient(ros.node, Fibonacci, action, feedback_filter=mode)
+    feedback_topic = f'{action}/_action/feedback'
+    assert ros.spin_until(lambda: client.server_is_ready()
+                          and ros.node.count_publishers(feedback_topic) > 0, 20)
+    received = []
+    handle = send(ros, client, 3, feedback_callback=received.append)
+    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+    ros.spin_until(lambda: len(received) == 3, 5)
+    assert [m.feedback.sequence[0] for m in received] == [0, 1, 2]
+    assert client.feedback_filter_state.held_goals == 1, client.feedback_filter_state
+    # Proven once: later goals are not held.
+    handle = send(ros, client, 1, feedback_callback=received.append)
+    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+    assert client.feedback_filter_state.held_goals == 1, client.feedback_filter_state
+
+
+def test_wait_for_server_proves_that_the_server_has_the_reader(ros, server):
+    """wait_for_server returns once the server's services are there and its feedback writer is
+    proven to have the reader, so the goals sent after it are never held."""
+    action, _ = server
+    client = ActionClient(ros.node, Fibonacci, action)
+    assert client.wait_for_server(timeout_sec=20)
+    received = []
+    handle = send(ros, client, 3, feedback_callback=received.append)
+    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+    ros.spin_until(lambda: len(received) == 3, 5)
+    assert [m.feedback.sequence[0] for m in received] == [0, 1, 2]
+    assert client.feedback_filter_state.held_goals == 0, client.feedback_filter_state
+
+
 def test_goal_without_feedback_callback_receives_no_feedback(ros, server):
     action, _ = server
     client = make_client(ros, action)
