@@ -23,7 +23,8 @@ from cft_action.client import FINISHED_GOAL_GRACE
 from cft_action.filters import NEVER_MATCH
 from harness.polling import wait_until
 from harness.ros import RosSession, unique_name
-from tests.support import action_server, helper_process, result_of, round_trip, send, server_evidence
+from tests.support import (action_server, helper_process, result_of, round_trip, send,
+                           server_evidence)
 
 PERIOD = 0.01  # 100 Hz feedback per goal
 
@@ -262,6 +263,15 @@ def test_a_held_goal_waits_from_the_first_spin_not_from_the_call(ros, server, mo
     assert (state.held_goals, state.arrival_timeouts, state.confirmed) == (1, 0, True), state
 
 
+def complete_feedback_of_one_goal(ros, client, order=3):
+    """Send a goal with a feedback callback; return the ``k`` of its feedback, once finished."""
+    received = []
+    handle = send(ros, client, order, feedback_callback=received.append)
+    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+    ros.spin_until(lambda: len(received) == order, 5)
+    return [m.feedback.sequence[0] for m in received]
+
+
 @pytest.mark.parametrize('mode', ['client', 'goals'])
 def test_the_first_goal_waits_for_proof_that_the_server_has_the_reader(ros, server, mode):
     """The feedback reader is recreated with the first filter, after the goal service's endpoints:
@@ -272,15 +282,10 @@ def test_the_first_goal_waits_for_proof_that_the_server_has_the_reader(ros, serv
     feedback_topic = f'{action}/_action/feedback'
     assert ros.spin_until(lambda: client.server_is_ready()
                           and ros.node.count_publishers(feedback_topic) > 0, 20)
-    received = []
-    handle = send(ros, client, 3, feedback_callback=received.append)
-    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
-    ros.spin_until(lambda: len(received) == 3, 5)
-    assert [m.feedback.sequence[0] for m in received] == [0, 1, 2]
+    assert complete_feedback_of_one_goal(ros, client) == [0, 1, 2]
     assert client.feedback_filter_state.held_goals == 1, client.feedback_filter_state
     # Proven once: later goals are not held.
-    handle = send(ros, client, 1, feedback_callback=received.append)
-    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+    assert complete_feedback_of_one_goal(ros, client, 1) == [0]
     assert client.feedback_filter_state.held_goals == 1, client.feedback_filter_state
 
 
@@ -290,11 +295,7 @@ def test_wait_for_server_proves_that_the_server_has_the_reader(ros, server):
     action, _ = server
     client = ActionClient(ros.node, Fibonacci, action)
     assert client.wait_for_server(timeout_sec=20)
-    received = []
-    handle = send(ros, client, 3, feedback_callback=received.append)
-    assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
-    ros.spin_until(lambda: len(received) == 3, 5)
-    assert [m.feedback.sequence[0] for m in received] == [0, 1, 2]
+    assert complete_feedback_of_one_goal(ros, client) == [0, 1, 2]
     assert client.feedback_filter_state.held_goals == 0, client.feedback_filter_state
 
 
