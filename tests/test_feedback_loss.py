@@ -10,7 +10,6 @@ import time
 
 import pytest
 from rclpy.qos import QoSProfile
-from test_msgs.action import Fibonacci
 
 from cft_action import guard
 from harness.ros import unique_name

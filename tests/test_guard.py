@@ -32,9 +32,9 @@ from harness.domain import unused_domain
 os.environ.setdefault('ROS_DOMAIN_ID', str(unused_domain()))
 os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
-from cft_action import guard  # noqa: E402
-from harness import crash, hazard  # noqa: E402
-from harness.proc import Proc, python_module  # noqa: E402
+from cft_action import guard
+from harness import crash, hazard
+from harness.proc import Proc, python_module
 
 HELPERS = Path(__file__).resolve().parent / 'helpers'
 SCENARIO = 'tests.helpers.guard_scenario'
