@@ -91,7 +91,7 @@ def summary(lives: list[dict[str, Any]], config: str) -> dict[str, Any]:
             'reader_unknown': sum(not life['reader_known'] for life in measured),
             'failed': len(mine) - len(measured),
             'held_first_goals': sum(life.get('held_goals', 0) for life in measured),
-            'wait_for_server_ms_p50': statistics.median(waits) if waits else None,
+            'wait_for_server_ms_p50': round(statistics.median(waits), 1) if waits else None,
             'wait_for_server_ms_p95': waits[math.ceil(0.95 * len(waits)) - 1] if waits else None}
 
 
@@ -126,7 +126,7 @@ def main() -> None:
                  and row['wait_for_server_ms_p50'] is not None else '-')
         print(f'{row["config"]:<8} {row["measured"]:>6} {row["reader_unknown"]:>15} '
               f'{row["failed"]:>7} {row["held_first_goals"]:>5} '
-              f'{row["wait_for_server_ms_p50"]:>14} / {row["wait_for_server_ms_p95"]:<12} '
+              f'{row["wait_for_server_ms_p50"]:>14.1f} / {row["wait_for_server_ms_p95"]:<12.1f} '
               f'{extra:>12}')
     out = REPO / 'benchmarks' / 'results' / \
         f'first-goal-reader-{started:%Y-%m-%d}-{platform.node()}.json'
