@@ -110,8 +110,7 @@ class HeldGoals:
         """Hold a request until its version is proven, and behind the requests held before it."""
         self._queue.append(held)
         self.count += 1
-        if not self._gate.proving:
-            self._begin()
+        self._begin()  # or poll the proof that runs already (the client's first, of its reader)
         return held.future
 
     def destroy(self) -> None:
@@ -121,7 +120,7 @@ class HeldGoals:
             self._gate.end()
 
     def _begin(self) -> None:
-        self._gate.begin(self._version_now())
+        self._gate.begin(self._version_now())  # unless one runs
         self._timer.resume()
 
     def _poll(self) -> None:

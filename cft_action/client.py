@@ -201,6 +201,12 @@ class ActionClient(CompatActionClient):
                              f'{self._resolved_action_name}/_action/feedback',
                              self._entities.feedback_reason,
                              is_content_filter_supported(self._cft_node))
+        if self._filter.plan is not None:
+            # The proof that the server has the recreated reader begins now: its probe's client is
+            # announced right after the reader, so the server discovers both at once, not a
+            # discovery round later when wait_for_server or the first goal asks for the proof.
+            with self._reader.lock:
+                self._arrival.begin(0)
 
     def _assemble(self) -> None:
         """Create the parts that an executor uses, once rclpy has made the rcl action client."""
@@ -324,10 +330,22 @@ class ActionClient(CompatActionClient):
             left = FILTER_ARRIVAL_TIMEOUT
             if timeout_sec is not None and timeout_sec >= 0:
                 left = min(left, max(0.0, timeout_sec - (time.monotonic() - started)))
-            if not self._arrival.wait(0, left):
+            if not self._await_reader_proof(time.monotonic() + left):
                 self._cft_logger.debug('wait_for_server: the server did not prove that it has '
                                        'the feedback reader in time; the first goal will be held')
         return True
+
+    def _await_reader_proof(self, deadline: float) -> bool:
+        """Poll the proof begun at construction (or a new one) until it came or ``deadline``."""
+        while True:
+            with self._reader.lock:
+                if self._arrival.is_confirmed(0):
+                    return True
+                self._arrival.begin(self._reader.updates)  # unless one runs
+                came = self._arrival.poll(time.monotonic(), FILTER_ARRIVAL_TIMEOUT)
+            if came is not None or time.monotonic() >= deadline:
+                return bool(came)
+            time.sleep(ARRIVAL_POLL_PERIOD)
 
     def destroy(self) -> None:
         """Destroy the underlying action client handle."""
