@@ -308,7 +308,7 @@ class ActionClient(CompatActionClient):
 
     def wait_for_server(self, timeout_sec: Optional[float] = None) -> bool:
         """
-        Wait for an action sever to be ready.
+        Wait for an action server to be ready.
 
         Returns as soon as an action server is ready for this client: as rclpy, once the server's
         services are available; with a feedback filter, also once the server's feedback writer is
