@@ -38,6 +38,7 @@ from cft_action import ActionClient
 from harness import load
 from harness.proc import Proc, python_module
 from harness.ros import RosSession
+from harness.server import feedback_reader_gids
 
 REPO = Path(__file__).resolve().parent.parent
 CONFIGS = ('rclpy', 'client', 'goals')
@@ -46,8 +47,8 @@ CONFIGS = ('rclpy', 'client', 'goals')
 def one_life(config: str, period: float) -> dict[str, Any]:
     """One client against a new server: whether the server knew its reader at its first goal."""
     action = f'/first_goal_reader_{uuid.uuid4().hex[:10]}'
-    server = Proc('server', python_module('harness.server', action, period, '--depth', 'all'),
-                  dict(os.environ))
+    server = Proc('server', python_module('harness.server', action, period, '--depth', 'all',
+                                          '--record-readers'), dict(os.environ))
     ros = RosSession()
     life: dict[str, Any] = {'config': config}
     try:
@@ -69,9 +70,8 @@ def one_life(config: str, period: float) -> dict[str, Any]:
             life['failed'] = 'no goal response'
             return life
         goal_uuid = bytes(goal.result().goal_id.uuid).hex()
-        own = {bytes(info.endpoint_gid[:16]).hex()
-               for info in ros.node.get_subscriptions_info_by_topic(f'{action}/_action/feedback')
-               if info.node_name == ros.node.get_name()}
+        own = set(feedback_reader_gids(ros.node, f'{action}/_action/feedback',
+                                       ros.node.get_name()))
         readers = json.loads(server.request('readers', 'READERS', 10).split(' ', 1)[1])
         life['reader_known'] = bool(own & set(readers.get(goal_uuid, [])))
         if config != 'rclpy':

@@ -61,7 +61,7 @@ from harness.crash import (alive, core_backtrace, crash_site, machine_line, plai
 from harness.domain import unused_domain
 from harness.proc import Proc, main_or_role, python_module
 from harness.report import say
-from harness.server import queue_kwargs
+from harness.server import feedback_reader_gids, queue_kwargs
 
 MODES = ('client', 'goals', 'upstream')
 DEPTH = 1000
@@ -245,11 +245,8 @@ def role_client(action: str, mode: str, seed: int, max_goals: int, order_min: in
             report['expression'] = state.expression
     if lost:  # to look it up among the readers that the server knew of when it took each goal
         report['goal_uuids'] = [goal[0].hex() for goal in goals]
-        feedback_topic = node.resolve_topic_name(action) + '/_action/feedback'
-        report['reader_gids'] = [
-            bytes(info.endpoint_gid[:16]).hex()
-            for info in node.get_subscriptions_info_by_topic(feedback_topic)
-            if info.node_name == node.get_name()]
+        report['reader_gids'] = feedback_reader_gids(
+            node, node.resolve_topic_name(action) + '/_action/feedback', node.get_name())
     report.update({
         'finished': finished, 'goals': len(goals), 'no_result': no_result,
         'rejected': rejected, 'canceled': canceled, 'published': published, 'lost': lost,
@@ -289,7 +286,9 @@ class Soak:
 
     def start_server(self) -> bool:
         self.server_dir = tempfile.mkdtemp(prefix='cft_soak_')
-        self.server = Proc('server', server_command(self.action, self.opts.period, 0, DEPTH),
+        # Recording the readers at each take lets a lossy life be checked for a late match.
+        self.server = Proc('server', server_command(self.action, self.opts.period, 0, DEPTH,
+                                                    record_readers=True),
                            server_env(self.domain, self.guarded), cwd=self.server_dir, core=True)
         ready = self.server.wait_for('READY', 60.0) is not None
         say(f'    server pid {self.server.pid} (guard {"on" if self.guarded else "off"}, '

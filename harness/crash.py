@@ -31,14 +31,17 @@ def alive(pid: int) -> bool:
     return state not in ('Z', 'X')
 
 
-def server_command(action: str, period: float, pad: int, depth: Optional[int] = None) -> list[str]:
+def server_command(action: str, period: float, pad: int, depth: Optional[int] = None, *,
+                   record_readers: bool = False) -> list[str]:
     """The action server (:mod:`harness.server`) with counters every 2 s, for a crash watcher.
 
     Without ``depth``, its queues have rclpy's defaults, as an ordinary server's.
+    ``record_readers``: its ``--record-readers``.
     """
     depth_args = [] if depth is None else ['--depth', str(depth)]
+    extra = ['--record-readers'] if record_readers else []
     return python_module('harness.server', action, period, '--pad', pad, *depth_args,
-                         '--stats-every', 2)
+                         '--stats-every', 2, *extra)
 
 
 def plain_env(domain: int, **extra: str) -> dict[str, str]:

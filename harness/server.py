@@ -3,7 +3,7 @@
 
 Usage: ``python -m harness.server ACTION PERIOD_S [--pad N] [--depth N|all] [--result-timeout S]
 [--stats-every S] [--late-feedback S] [--executor single|multi] [--goal-depth N]
-[--hold-goals N]``
+[--hold-goals N] [--record-readers]``
 
 Goal ``order`` is the number of feedback messages the goal gets (a negative order is rejected;
 cancels are accepted). Each feedback ``sequence`` is ``[k, seconds, nanoseconds] + [0] * PAD``:
@@ -47,9 +47,10 @@ filter-verdict, writer-limit and filter-class counters) and ``writers`` (the GUI
 feedback and status writers, in hex).
 ``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
 by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). ``READERS <json>``
-replies to ``readers``: per goal UUID in hex, the GIDs (hex) of the feedback readers in this
-server's graph when it took the goal's request; ``READERS_NOW <json>`` to ``readers now``, those
-in its graph now. The command
+replies to ``readers``: with ``--record-readers``, per goal UUID in hex, the GIDs (hex) of the
+feedback readers in this server's graph when it took the goal's request (a graph query per goal,
+2 ms with 40 readers: off by default, so as not to load the server that other benchmarks
+measure); ``READERS_NOW <json>`` to ``readers now``, those in its graph now. The command
 ``release`` ends ``--hold-goals``. End of input stops the server.
 """
 
@@ -108,6 +109,14 @@ _SEND_FAILED = 'Failed to send goal response'
 _RESPONSE_TIMED_OUT = 'failed to send response (timeout)'
 
 
+def feedback_reader_gids(node: Node, topic: str, node_name: Optional[str] = None) -> list[str]:
+    """The GIDs (hex, 16 bytes) of the readers on ``topic`` in ``node``'s graph, of one node if
+    ``node_name`` is given."""
+    return [bytes(info.endpoint_gid[:16]).hex()
+            for info in node.get_subscriptions_info_by_topic(topic)
+            if node_name is None or info.node_name == node_name]
+
+
 class _CountingLogger:
     """An rclpy logger that counts the ActionServer's failed goal-response sends."""
 
@@ -129,8 +138,9 @@ class _CountingLogger:
 class CountingActionServer(ActionServer):
     """An rclpy ActionServer that records, per goal UUID, whether its goal response went out."""
 
-    def __init__(self, *args: Any, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, record_readers: bool = False, **kwargs: Any) -> None:
         self.request_lock = threading.Lock()
+        self.record_readers = record_readers
         self.requests: dict[str, str] = {}  # goal UUID (hex) -> 'taken', 'sent' or 'failed'
         self.takes: list[tuple[str, float]] = []  # (goal UUID (hex), time.monotonic()) per take
         # goal UUID (hex) -> the feedback readers that this server's graph showed when it took the
@@ -167,10 +177,11 @@ class CountingActionServer(ActionServer):
 
     async def _execute_goal_request(self, request_header_and_message: Any) -> None:
         key = bytes(request_header_and_message[1].goal_id.uuid).hex()
-        readers = [bytes(info.endpoint_gid[:16]).hex() for info in
-                   self._node.get_subscriptions_info_by_topic(self.feedback_topic)]
+        readers = (feedback_reader_gids(self._node, self.feedback_topic)
+                   if self.record_readers else None)
         with self.request_lock:
-            self.readers_at_take[key] = readers
+            if readers is not None:
+                self.readers_at_take[key] = readers
             self.counts['goal_requests'] += 1
             self.requests[key] = 'taken'
         # The response is sent before the coroutine's first await that can suspend it (the goal
@@ -190,7 +201,7 @@ class TickingServer:
                  pad: int = 0, depth: Optional[str] = None,
                  result_timeout: int = DEFAULT_RESULT_TIMEOUT_S,
                  late_feedback: float = 0.0, goal_depth: Optional[int] = None,
-                 hold_goals: int = 0) -> None:
+                 hold_goals: int = 0, record_readers: bool = False) -> None:
         """Create the action server on ``node`` and start the ticker thread."""
         self.executor = executor
         self.started = time.monotonic()
@@ -225,7 +236,8 @@ class TickingServer:
         self.server = CountingActionServer(
             node, Fibonacci, action, execute_callback=self.execute, goal_callback=self.on_goal,
             cancel_callback=lambda _: CancelResponse.ACCEPT,
-            callback_group=ReentrantCallbackGroup(), result_timeout=result_timeout, **qos)
+            callback_group=ReentrantCallbackGroup(), result_timeout=result_timeout,
+            record_readers=record_readers, **qos)
         self.ticker = threading.Thread(target=self.tick, daemon=True)
         self.ticker.start()
 
@@ -363,6 +375,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help='SingleThreadedExecutor (default) or MultiThreadedExecutor')
     parser.add_argument('--goal-depth', type=int,
                         help="the goal service's depth alone (keep-last, reliable)")
+    parser.add_argument('--record-readers', action='store_true',
+                        help='record the feedback readers in the graph when each goal is taken '
+                             '(command readers)')
     parser.add_argument('--hold-goals', type=int, default=0,
                         help='goals wait after their first feedback until this many were accepted '
                              '(or the command release)')
@@ -378,7 +393,7 @@ def main(argv: list[str]) -> None:
     executor.add_node(node)
     server = TickingServer(node, executor, args.action, args.period, args.pad, args.depth,
                            args.result_timeout, args.late_feedback, args.goal_depth,
-                           args.hold_goals)
+                           args.hold_goals, args.record_readers)
     # The RTPS GUIDs of the feedback and status writers, to tell their packets apart on the wire.
     writers = {name: [bytes(info.endpoint_gid).hex() for info in
                       node.get_publishers_info_by_topic(f'{args.action}/_action/{name}')]
@@ -423,9 +438,7 @@ def main(argv: list[str]) -> None:
         elif line.strip() == 'readers now':
             topic = server.server.feedback_topic
             with out:
-                print('READERS_NOW ' + json.dumps([bytes(info.endpoint_gid[:16]).hex() for info in
-                                                   node.get_subscriptions_info_by_topic(topic)]),
-                      flush=True)
+                print('READERS_NOW ' + json.dumps(feedback_reader_gids(node, topic)), flush=True)
         elif line.strip() == 'takes':
             with server.server.request_lock:
                 takes = json.dumps(server.server.takes)
@@ -442,7 +455,7 @@ def main(argv: list[str]) -> None:
     spinner.join(2.0)
     if not (server.ticker.is_alive() or spinner.is_alive()):
         # The participant's shared-memory segment and ports stay in /dev/shm after an _exit
-        # without it (measured: 4 files a server, thousands over a few sessions).
+        # without it (measured: 6 files a server, thousands over a few sessions).
         server.server.destroy()
         node.destroy_node()
         rclpy.try_shutdown()
