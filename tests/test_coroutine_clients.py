@@ -1,0 +1,45 @@
+"""Nodes written as users write them survive the library (issue 28): coroutine timer callbacks
+that await ``send_goal_async`` and ``get_result_async``, the timer and the action client in one
+reentrant callback group, a 4-thread ``MultiThreadedExecutor``, three such processes at once.
+
+The library's timers once paused by ``cancel()``, which raced the executor's worker threads: in
+``goals`` mode 3 of 8 runs of this scenario lost a client process to rclpy's ``failed to call
+timer: timer is canceled``, and goals that a dead timer held never completed.
+tests/test_paused_timer.py forces that race; this test runs the scenario end to end.
+"""
+
+import json
+
+import pytest
+
+from cft_action import guard
+from harness.ros import unique_name
+from tests.support import action_server, helper_process
+
+PROCESSES = 3
+GOALS = 40
+IN_FLIGHT = 4
+DEADLINE_S = 90
+
+
+@pytest.mark.parametrize('mode', ['client', 'goals'])
+def test_coroutine_clients_on_multithreaded_executors_complete_every_goal(mode):
+    action = '/' + unique_name('fib')
+    server = action_server(action, 0.02, env=guard.environment())
+    clients = []
+    try:
+        clients = [helper_process('tests.helpers.coroutine_client',
+                                  [action, mode, GOALS, IN_FLIGHT, DEADLINE_S], ready='')
+                   for _ in range(PROCESSES)]
+        for client in clients:
+            line = client.wait_for('RESULT', DEADLINE_S + 60)
+            status = client.wait(20)
+            assert line is not None and status == 0, f'status {status}\n{client.tail(40)}'
+            report = json.loads(line.split(' ', 1)[1])
+            assert report['results'] == GOALS, report
+            assert report['foreign'] == 0, report
+        assert server.poll() is None, f'server died\n{server.tail()}'
+    finally:
+        for client in clients:
+            client.stop()
+        server.stop()
