@@ -6,6 +6,12 @@ overtake the update at the server, whose feedback writer then drops the goal's f
 its old filter (docs/INTERNALS.md, "Proof of arrival"). The action client therefore holds such a
 request until its :class:`cft_action.arrival.ArrivalGate` has proven the version, polling the
 gate from a timer of the client's callback group, and sends the held requests in call order.
+
+A proof that does not come within the timeout is not waited for again: from then on goals go out
+at once, as rclpy sends them, while one proof goes on in the background, and holding resumes only
+once that proof has come. A server that never answers the probe (a cancel service that takes
+requests and never replies, or replies that rmw keeps dropping) so costs a client life one hold,
+not one per goal.
 """
 
 from __future__ import annotations
@@ -81,16 +87,22 @@ class HeldGoals:
     :param probed_service: The service whose reply is the proof, for that warning.
     :param timeout: Seconds that a proof may take, from its first poll.
     :param poll_period: Seconds between polls while requests are held.
+    :param background_poll_period: Seconds between polls of the background proof, once holding
+        is suspended.
     """
 
     def __init__(self, node: Node, callback_group: CallbackGroup, gate: ArrivalGate, lock: Any,
                  send: Callable[[Any, Optional[Callable], UUID], Future],
                  version_now: Callable[[], int], logger: PromptLogger, probed_service: str, *,
-                 timeout: float, poll_period: float) -> None:
+                 timeout: float, poll_period: float, background_poll_period: float) -> None:
         self._gate, self._lock, self._send, self._version_now = gate, lock, send, version_now
         self._logger, self._probed_service, self._timeout = logger, probed_service, timeout
+        self._poll_period, self._background_poll_period = poll_period, background_poll_period
         self._queue: list[HeldGoal] = []
+        self._destroyed = False
         self.count = 0  # requests held since construction
+        #: Whether a proof timed out and none has come since: goals are then not held.
+        self.suspended = False
         self._timer = PausedTimer(node, poll_period, self._poll, callback_group)
 
     @property
@@ -103,8 +115,19 @@ class HeldGoals:
         return max((held.version for held in self._queue), default=-1)
 
     def must_hold(self, version: int, writer_is_remote: Callable[[], bool]) -> bool:
-        """Whether a request that needs ``version`` waits: behind others, or for a proof."""
-        return bool(self._queue) or (not self._gate.is_confirmed(version) and writer_is_remote())
+        """Whether a request that needs ``version`` waits: behind others, or for a proof.
+
+        While holding is suspended it never waits for a proof, and a proof goes on in the
+        background instead, so that holding resumes once the server answers.
+        """
+        if self._queue:
+            return True
+        if self._gate.is_confirmed(version) or not writer_is_remote():
+            return False
+        if self.suspended:
+            self._begin()
+            return False
+        return True
 
     def hold(self, held: HeldGoal) -> Future:
         """Hold a request until its version is proven, and behind the requests held before it."""
@@ -115,9 +138,36 @@ class HeldGoals:
 
     def destroy(self) -> None:
         """Stop polling; the held requests are never sent."""
-        self._timer.destroy()
         with self._lock:
+            self._destroyed = True  # a poll that runs now begins no new proof
             self._gate.end()
+        self._timer.destroy()
+
+    def poll_proof(self) -> Optional[bool]:
+        """Poll the running proof: True once it came, False once it timed out, else None.
+
+        A timeout suspends holding (logged the first time) and begins the background proof; a
+        proof that came ends the suspension. Call it with ``lock`` held.
+        """
+        came = self._gate.poll(time.monotonic(), None if self.suspended else self._timeout)
+        if came:
+            if self.suspended:
+                self._logger.info(f'the action server answered {self._probed_service}: goals '
+                                  'are held again until their filter is proven at the server')
+            self.suspended = False
+            self._timer.set_period(self._poll_period)
+        elif came is False:
+            if self._gate.timeouts == 1:
+                self._logger.warning(
+                    f'the action server did not answer {self._probed_service} within '
+                    f'{self._timeout:g} s, so that its feedback writer has this client\'s '
+                    'feedback filter is not proven: goals are sent without that proof from now '
+                    'on, as rclpy sends them, until the server answers, and the first feedback '
+                    'that the server publishes for a goal may be lost meanwhile')
+            self.suspended = True
+            self._timer.set_period(self._background_poll_period)
+            self._begin()
+        return came
 
     def _begin(self) -> None:
         self._gate.begin(self._version_now())  # unless one runs
@@ -125,25 +175,18 @@ class HeldGoals:
 
     def _poll(self) -> None:
         with self._lock:
+            if self._destroyed:
+                return
             if not self._gate.proving:
                 self._timer.pause()
                 return
-            came = self._gate.poll(time.monotonic(), self._timeout)
+            came = self.poll_proof()
             if came is None:
                 return
-            if came:
-                self._release(self._gate.confirmed)
-            else:
-                if self._gate.timeouts == 1:
-                    self._logger.warning(
-                        f'the action server did not answer {self._probed_service} within '
-                        f'{self._timeout:g} s, so that its feedback writer has this client\'s '
-                        'feedback filter is not proven: held goals are sent without it, and the '
-                        'first feedback that the server publishes for them may be lost')
-                self._release(self.needed())
+            self._release(self._gate.confirmed if came else self.needed())
             if self._queue:
                 self._begin()
-            else:
+            elif not self._gate.proving:
                 self._timer.pause()
 
     def _release(self, up_to_version: int) -> None:

@@ -285,7 +285,7 @@ class ArrivalGate:
         if self._proof is None:
             self._proof = ArrivalProof(self._node, self._targets, version)
 
-    def poll(self, now: float, timeout: float) -> Optional[bool]:
+    def poll(self, now: float, timeout: Optional[float]) -> Optional[bool]:
         """Poll the running proof: True once it came, False once it timed out, else None.
 
         Either outcome ends the proof; one that came confirms its version, one that timed out is
@@ -293,7 +293,7 @@ class ArrivalGate:
 
         :param now: ``time.monotonic()``.
         :param timeout: Seconds that the proof may take, from its first poll: a caller that spins
-            only later gives it no chance before.
+            only later gives it no chance before. None: as long as it takes.
         """
         proof = self._proof
         if proof is None:
@@ -301,7 +301,8 @@ class ArrivalGate:
         came = proof.poll(now)
         if came:
             self._confirmed = max(self._confirmed, proof.version)
-        elif proof.polled_since is not None and now - proof.polled_since >= timeout:
+        elif (timeout is not None and proof.polled_since is not None
+              and now - proof.polled_since >= timeout):
             self.timeouts += 1
         else:
             return None

@@ -74,6 +74,10 @@ FILTER_ARRIVAL_TIMEOUT = 5.0
 #: Seconds between polls of the arrival probe while goal requests are held.
 ARRIVAL_POLL_PERIOD = 0.01
 
+#: Seconds between polls of the proof that goes on in the background after one timed out, while
+#: goals are sent without holds: the probe's resend interval (``PROBE_MAX_RESEND_S``) by then.
+BACKGROUND_PROOF_POLL_PERIOD = 0.5
+
 
 class FeedbackFilterState(NamedTuple):
     """A snapshot of an :class:`ActionClient`'s feedback filter.
@@ -93,6 +97,9 @@ class FeedbackFilterState(NamedTuple):
     :ivar held_goals: goal requests that were held for that proof, since construction.
     :ivar arrival_timeouts: times the proof did not come within ``FILTER_ARRIVAL_TIMEOUT`` and the
         held goals were sent without it.
+    :ivar holds_suspended: whether, since such a timeout, goals are sent at once, without a
+        proof, as rclpy sends them: a client waits for a proof that does not come only once, and
+        holds goals again once a proof, which goes on in the background, has come.
     :ivar filtered_in: where other goals' feedback is dropped: ``'writer'`` (the server's writer
         does not send it: a guarded server, or ``writer_filtering='any'``), ``'reader'`` (it
         crosses the network and this client's DDS reader drops it before Python: an unguarded
@@ -112,6 +119,7 @@ class FeedbackFilterState(NamedTuple):
     held_goals: int = 0
     arrival_timeouts: int = 0
     filtered_in: str = 'unknown'
+    holds_suspended: bool = False
 
 
 def _resolve_mode(feedback_filter: Optional[str], optimization: Optional[bool]) -> str:
@@ -225,7 +233,8 @@ class ActionClient(CompatActionClient):
         self._held_goals = HeldGoals(
             node, self.callback_group, self._arrival, lock, super().send_goal_async,
             lambda: self._reader.updates, self._cft_logger, cancel_service,
-            timeout=FILTER_ARRIVAL_TIMEOUT, poll_period=ARRIVAL_POLL_PERIOD)
+            timeout=FILTER_ARRIVAL_TIMEOUT, poll_period=ARRIVAL_POLL_PERIOD,
+            background_poll_period=BACKGROUND_PROOF_POLL_PERIOD)
         self._finished_goals = FinishedGoals(
             node, self.callback_group, lock, self._cft_feedback_callbacks, self._filter.release,
             grace=FINISHED_GOAL_GRACE, period=RELEASE_CHECK_PERIOD)
@@ -244,7 +253,8 @@ class ActionClient(CompatActionClient):
                 feedback_taken=self._feedback_taken, feedback_dropped=self._feedback_dropped,
                 confirmed=plan is None or self._arrival.is_confirmed(self._held_goals.needed()),
                 held_goals=self._held_goals.count, arrival_timeouts=self._arrival.timeouts,
-                filtered_in=self._filter.filtered_in(self._feedback_taken))
+                filtered_in=self._filter.filtered_in(self._feedback_taken),
+                holds_suspended=self._held_goals.suspended)
 
     def new_goal_uuid(self) -> UUID:
         """
@@ -325,7 +335,7 @@ class ActionClient(CompatActionClient):
             return False
         with self._reader.lock:
             unproven = (self._filter.plan is not None and not self._arrival.is_confirmed(0)
-                        and self._feedback_writers.any())
+                        and not self._held_goals.suspended and self._feedback_writers.any())
         if unproven:
             left = FILTER_ARRIVAL_TIMEOUT
             if timeout_sec is not None and timeout_sec >= 0:
@@ -342,7 +352,7 @@ class ActionClient(CompatActionClient):
                 if self._arrival.is_confirmed(0):
                     return True
                 self._arrival.begin(self._reader.updates)  # unless one runs
-                came = self._arrival.poll(time.monotonic(), FILTER_ARRIVAL_TIMEOUT)
+                came = self._held_goals.poll_proof()
             if came is not None or time.monotonic() >= deadline:
                 return bool(came)
             time.sleep(ARRIVAL_POLL_PERIOD)

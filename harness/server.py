@@ -3,7 +3,7 @@
 
 Usage: ``python -m harness.server ACTION PERIOD_S [--pad N] [--depth N|all] [--result-timeout S]
 [--stats-every S] [--late-feedback S] [--executor single|multi] [--goal-depth N]
-[--hold-goals N] [--record-readers]``
+[--hold-goals N] [--record-readers] [--mute-cancel]``
 
 Goal ``order`` is the number of feedback messages the goal gets (a negative order is rejected;
 cancels are accepted). Each feedback ``sequence`` is ``[k, seconds, nanoseconds] + [0] * PAD``:
@@ -18,6 +18,8 @@ seconds after its result, the way a sample lost on the way and resent arrives at
 With ``--hold-goals N``, goals of positive order get their first feedback at once and then wait,
 with no further feedback, until N of them have been accepted (or the command ``release`` comes):
 so that N goals are live at once, however long their requests take to arrive.
+With ``--mute-cancel``, cancel requests are taken and never answered, as by a broken server, or one
+whose replies rmw keeps dropping.
 
 Execute callbacks are coroutines, so one single-threaded executor serves any number of goals
 (rclpy's ActionServer dropped goal requests under a MultiThreadedExecutor here).
@@ -138,15 +140,18 @@ class _CountingLogger:
 class CountingActionServer(ActionServer):
     """An rclpy ActionServer that records, per goal UUID, whether its goal response went out."""
 
-    def __init__(self, *args: Any, record_readers: bool = False, **kwargs: Any) -> None:
+    def __init__(self, *args: Any, record_readers: bool = False, mute_cancel: bool = False,
+                 **kwargs: Any) -> None:
         self.request_lock = threading.Lock()
         self.record_readers = record_readers
+        self.mute_cancel = mute_cancel
         self.requests: dict[str, str] = {}  # goal UUID (hex) -> 'taken', 'sent' or 'failed'
         self.takes: list[tuple[str, float]] = []  # (goal UUID (hex), time.monotonic()) per take
         # goal UUID (hex) -> the feedback readers that this server's graph showed when it took the
         # goal request, as GID hex: whether a client's reader was discovered before its goal ran.
         self.readers_at_take: dict[str, list[str]] = {}
-        self.counts = {'goal_requests': 0, 'goal_responses': 0, 'goal_response_errors': 0}
+        self.counts = {'goal_requests': 0, 'goal_responses': 0, 'goal_response_errors': 0,
+                       'cancel_requests_unanswered': 0}
         self._failed_send = threading.local()
         super().__init__(*args, **kwargs)
         self.feedback_topic = self._node.resolve_topic_name(args[2]) + '/_action/feedback'
@@ -175,6 +180,13 @@ class CountingActionServer(ActionServer):
     def _note_failed_send(self) -> None:
         self._failed_send.value = True
 
+    async def _execute_cancel_request(self, request_header_and_message: Any) -> None:
+        if not self.mute_cancel:
+            await super()._execute_cancel_request(request_header_and_message)
+            return
+        with self.request_lock:  # taken from rcl, and never answered
+            self.counts['cancel_requests_unanswered'] += 1
+
     async def _execute_goal_request(self, request_header_and_message: Any) -> None:
         key = bytes(request_header_and_message[1].goal_id.uuid).hex()
         readers = (feedback_reader_gids(self._node, self.feedback_topic)
@@ -201,7 +213,8 @@ class TickingServer:
                  pad: int = 0, depth: Optional[str] = None,
                  result_timeout: int = DEFAULT_RESULT_TIMEOUT_S,
                  late_feedback: float = 0.0, goal_depth: Optional[int] = None,
-                 hold_goals: int = 0, record_readers: bool = False) -> None:
+                 hold_goals: int = 0, record_readers: bool = False,
+                 mute_cancel: bool = False) -> None:
         """Create the action server on ``node`` and start the ticker thread."""
         self.executor = executor
         self.started = time.monotonic()
@@ -237,7 +250,7 @@ class TickingServer:
             node, Fibonacci, action, execute_callback=self.execute, goal_callback=self.on_goal,
             cancel_callback=lambda _: CancelResponse.ACCEPT,
             callback_group=ReentrantCallbackGroup(), result_timeout=result_timeout,
-            record_readers=record_readers, **qos)
+            record_readers=record_readers, mute_cancel=mute_cancel, **qos)
         self.ticker = threading.Thread(target=self.tick, daemon=True)
         self.ticker.start()
 
@@ -378,6 +391,9 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('--record-readers', action='store_true',
                         help='record the feedback readers in the graph when each goal is taken '
                              '(command readers)')
+    parser.add_argument('--mute-cancel', action='store_true',
+                        help='take cancel requests and never answer them (command stats counts '
+                             'them)')
     parser.add_argument('--hold-goals', type=int, default=0,
                         help='goals wait after their first feedback until this many were accepted '
                              '(or the command release)')
@@ -393,7 +409,7 @@ def main(argv: list[str]) -> None:
     executor.add_node(node)
     server = TickingServer(node, executor, args.action, args.period, args.pad, args.depth,
                            args.result_timeout, args.late_feedback, args.goal_depth,
-                           args.hold_goals, args.record_readers)
+                           args.hold_goals, args.record_readers, args.mute_cancel)
     # The RTPS GUIDs of the feedback and status writers, to tell their packets apart on the wire.
     writers = {name: [bytes(info.endpoint_gid).hex() for info in
                       node.get_publishers_info_by_topic(f'{args.action}/_action/{name}')]

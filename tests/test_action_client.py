@@ -10,6 +10,7 @@ from pathlib import Path
 
 import pytest
 from action_msgs.msg import GoalStatus
+from rclpy.action import ActionClient as RclpyActionClient
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.qos import QoSProfile
 from rclpy.task import Future
@@ -453,3 +454,48 @@ def test_the_newer_distros_flag_is_accepted(ros, server, kwargs, mode):
     with pytest.raises(ValueError, match='contradicts'):
         ActionClient(ros.node, Fibonacci, action, enable_feedback_msg_optimization=False,
                      feedback_filter='client')
+
+
+@pytest.mark.parametrize('mode', ['client', 'goals'])
+def test_a_proof_that_never_comes_costs_a_client_one_hold(ros, mode, monkeypatch):
+    """A server whose cancel service takes requests and never answers cannot prove that its
+    feedback writer has this client's reader (nor a filter update in ``goals`` mode):
+    wait_for_server waits for the proof once, for ``FILTER_ARRIVAL_TIMEOUT``, and every goal after
+    it goes out at once, as plain rclpy's, where each goal used to wait that long again."""
+    monkeypatch.setattr(cft_action.client, 'FILTER_ARRIVAL_TIMEOUT', 2.0)  # a shorter test
+    action = '/' + unique_name('fib')
+    child = action_server(action, PERIOD, env=guard.environment(), mute_cancel=True)
+    try:
+        client = ActionClient(ros.node, Fibonacci, action, feedback_filter=mode)
+        started = time.monotonic()
+        assert client.wait_for_server(timeout_sec=20)
+        waited = time.monotonic() - started
+        state = client.feedback_filter_state
+        assert (state.arrival_timeouts, state.holds_suspended) == (1, True), state
+        plain = RclpyActionClient(ros.node, Fibonacci, action)
+        assert plain.wait_for_server(timeout_sec=20)
+        latencies = {'plain': [], mode: []}
+        feedback: list[list[int]] = []
+        for _ in range(4):
+            for name, each in (('plain', plain), (mode, client)):
+                received: list[int] = []
+                sent = time.monotonic()
+                handle = send(ros, each, 3, feedback_callback=lambda m, r=received: r.append(
+                    m.feedback.sequence[0]))
+                latencies[name].append(round(time.monotonic() - sent, 3))
+                assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+                if each is client:
+                    feedback.append(received)
+        stats = child.request_json('stats', 'STATS')
+        assert child.poll() is None, f'server died\n{child.tail()}'
+    finally:
+        child.stop()
+    state = client.feedback_filter_state
+    evidence = f'waited {waited:.2f} s, latencies {latencies}, {state}, {stats}'
+    assert stats['cancel_requests_unanswered'] > 0, evidence
+    # No goal waited for the proof again: none was held, and each was answered as fast as a
+    # plain client's, within the noise of a shared machine, far below the 2 s of a hold.
+    assert (state.held_goals, state.arrival_timeouts, state.holds_suspended) == (0, 1, True), \
+        evidence
+    assert max(latencies[mode]) < 1.0, evidence
+    assert 1.5 < waited < 10, evidence
