@@ -44,6 +44,7 @@ class CoroutineClient(Node):
         self.foreign = 0
         self.published: dict[int, int] = {}  # goal index -> feedback the server published
         self.stage: dict[int, str] = {}  # goal index -> what it awaits: 'response' or 'result'
+        self.handles: dict[int, object] = {}  # goal index -> goal handle, while it awaits its result
         self.timer = self.create_timer(0.02, self.tick, callback_group=group)
 
     async def tick(self) -> None:
@@ -66,6 +67,7 @@ class CoroutineClient(Node):
             goal_uuid.append(bytes(goal_handle.goal_id.uuid))
             if goal_handle.accepted:
                 self.stage[index] = 'result'
+                self.handles[index] = goal_handle
                 response = await goal_handle.get_result_async()
                 self.published[index] = response.result.sequence[0]
             del self.stage[index]
@@ -102,6 +104,9 @@ def main() -> None:
     print('RESULT ' + json.dumps({'sent': node.sent, 'results': len(node.published),
                                   'foreign': node.foreign, 'short_feedback': lost,
                                   'unfinished': node.stage,
+                                  'unfinished_status': {i: node.handles[i].status
+                                                        for i in node.stage if i in node.handles},
+                                  'pending_results': len(node.client._pending_result_requests),
                                   'state': state._asdict() if state else None}), flush=True)
     executor.shutdown()
     node.destroy_node()
