@@ -18,10 +18,11 @@ time its whole process used (all threads, DDS included) over the same measuremen
 
 Every filter change (and every filtered reader that comes or goes) is an event at every
 ``/parameter_events`` writer, that is, at every node; with Fast DDS 2.14 such an event can crash a
-process that is publishing at that moment (eProsima/Fast-DDS#4878, docs/INTERNALS.md section 10). So the
-nodes' process runs under :mod:`cft_action.guard` unless ``--no-guard`` is given. ``--soak N`` then
-changes the filtered handler's node set 2*N times while the nodes keep publishing, and reports
-whether the nodes' process survived: run it with ``--no-guard`` to see the hazard.
+process that is publishing at that moment (eProsima/Fast-DDS#4878, docs/INTERNALS.md section 10).
+So the nodes' process runs under :mod:`cft_action.guard` unless ``--no-guard`` is given.
+``--soak N`` then changes the filtered handler's node set 2*N times while the nodes keep
+publishing, and reports whether the nodes' process survived: run it with ``--no-guard`` to see
+the hazard.
 
 The demo uses its own ``ROS_DOMAIN_ID`` (random, unless set) and localhost-only discovery.
 """
@@ -263,7 +264,7 @@ def main() -> None:
         handlers = {kind: Child(['--handler', kind, *watched, extra])
                     for kind in ('filtered', 'rclpy')}
         children.extend(handlers.values())
-        for kind, child in handlers.items():
+        for child in handlers.values():
             child.expect('READY', 30)
         for kind, child in handlers.items():
             if child.expect(('WARM', 'COLD'), 35) != 'WARM':

@@ -99,8 +99,8 @@ def role_update(action: str, count: int, interval: float, server_pid: int) -> in
         say('ERROR no feedback subscription:', reason)
         return 2
     # The class a default client uses (the library's own, unless CFT_ACTION_WRITER_FILTERING=any).
-    filter_class = (_rcl.UUID_FILTER_CLASS
-                    if os.environ.get('CFT_ACTION_WRITER_FILTERING', 'guarded') == 'guarded' else None)
+    guarded = os.environ.get('CFT_ACTION_WRITER_FILTERING', 'guarded') == 'guarded'
+    filter_class = _rcl.UUID_FILTER_CLASS if guarded else None
     # The first filter recreates the reader: before use.
     _rcl.set_content_filter(ptr, NEVER[0], filter_class=filter_class)
     if not client.wait_for_server(timeout_sec=20.0):

@@ -78,7 +78,7 @@ def main() -> None:
             print(f'BURST {count}', flush=True)
         elif words[0] == 'matched':
             wanted = int(words[1])
-            matched = wait_until(lambda: all(
+            matched = wait_until(lambda wanted=wanted: all(
                 n._parameter_event_publisher.get_subscription_count() >= wanted
                 for n in nodes.values()))
             print('MATCHED' if matched else 'TIMEOUT', flush=True)

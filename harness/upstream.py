@@ -1,6 +1,7 @@
 """An emulation of the upstream (Rolling) feedback filter, for comparison only: not library code.
 
-Upstream (rcl#1287, rclpy#1633, docs/INTERNALS.md section 12), with ``enable_feedback_msg_optimization``:
+Upstream (rcl#1287, rclpy#1633, docs/INTERNALS.md section 12), with
+``enable_feedback_msg_optimization``:
 
 - the filter is ``(goal_id.uuid[0] = %0 AND ... goal_id.uuid[15] = %15) OR (... %16 ...)``: 16
   parameters per goal, goals OR-ed, each parameter one UUID byte in decimal;

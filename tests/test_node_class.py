@@ -57,8 +57,9 @@ def big_endian(node: str) -> bytes:
 
 def random_node(rng: random.Random) -> str:
     def word():
+        rest = string.ascii_lowercase + string.digits + '_'
         return rng.choice(string.ascii_lowercase) + ''.join(
-            rng.choice(string.ascii_lowercase + string.digits + '_') for _ in range(rng.randint(0, 8)))
+            rng.choice(rest) for _ in range(rng.randint(0, 8)))
     return '/' + '/'.join(word() for _ in range(rng.randint(1, 3)))
 
 

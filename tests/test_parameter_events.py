@@ -370,10 +370,10 @@ def test_use_sim_time_still_flips_the_clock(ros, start_nodes, prefix):
     for value in (True, False):
         child.send(f'remote {me} use_sim_time {"true" if value else "false"}')
         # Spin: our parameter service must answer the other process.
-        assert ros.spin_until(lambda: clock.ros_time_is_active == value, timeout=20), \
+        assert ros.spin_until(lambda value=value: clock.ros_time_is_active == value, timeout=20), \
             f'use_sim_time={value} did not reach the clock'
         assert child.expect('REMOTE', timeout=20) == 'REMOTE OK'
-        assert ros.spin_until(lambda: len(seen) >= (1 if value else 2), timeout=5)
+        assert ros.spin_until(lambda value=value: len(seen) >= (1 if value else 2), timeout=5)
     assert seen == [True, False]
     # The handler that watches another node did not receive this node's events.
     assert watching_other.parameter_event_filter_state.events_received == 0

@@ -172,7 +172,8 @@ def test_feedback_after_the_goal_is_accepted_is_delivered(ros, clients, server, 
     assert all(m.goal_id == goal_uuid for m in received)
 
 
-def test_feedback_published_before_the_goal_is_sent_is_not_delivered(ros, clients, server, publisher, mode):
+def test_feedback_published_before_the_goal_is_sent_is_not_delivered(
+        ros, clients, server, publisher, mode):
     client = clients(server, mode)
     goal_uuid = random_uuid()
     publish_feedback(publisher, bytes(goal_uuid.uuid))
@@ -241,7 +242,8 @@ def test_feedback_of_a_goal_without_a_callback_is_not_delivered(ros, clients, se
     assert all(m.goal_id == first.goal_id for m in received)
 
 
-def test_feedback_for_no_goal_of_this_client_is_not_delivered(ros, clients, server, publisher, mode):
+def test_feedback_for_no_goal_of_this_client_is_not_delivered(ros, clients, server, publisher,
+                                                              mode):
     client = clients(server, mode)
     received = []
     send(ros, client, 0, feedback_callback=received.append)
