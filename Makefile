@@ -35,9 +35,10 @@ TESTS ?=
 test: $(STAMP)
 	$(PY) -m pytest $(TESTS)
 
-# ruff and mypy take their settings from pyproject.toml.
+# ruff and mypy take their settings from pyproject.toml. ruff checks all the code (the library,
+# harness/, benchmarks/, tests/, demos/, compat/, setup.py; not the venvs, which it skips).
 lint: $(STAMP)
-	$(PY) -m ruff check cft_action
+	$(PY) -m ruff check .
 	$(PY) -m mypy
 
 demo: $(STAMP)
