@@ -154,3 +154,23 @@ def result_of(ros: RosSession, goal_handle: Any) -> Any:
     future = goal_handle.get_result_async()
     assert ros.spin_until(future.done, 30)
     return future.result()
+
+
+ROOT = Path(__file__).resolve().parent.parent
+# What the package's build reads: setup.py builds the extensions, pyproject.toml has the metadata
+# (and reads README.md), package.xml and resource/ make it an ament_python package.
+PACKAGE_FILES = ('setup.py', 'pyproject.toml', 'package.xml', 'README.md', 'resource')
+
+
+def copy_package(destination: Path) -> None:
+    """Copy what building the package reads into ``destination``: a clone's sources, without
+    what an editable install built in place."""
+    destination.mkdir(parents=True)
+    for name in PACKAGE_FILES:
+        source = ROOT / name
+        if source.is_dir():
+            shutil.copytree(source, destination / name)
+        else:
+            shutil.copy2(source, destination / name)
+    shutil.copytree(ROOT / 'cft_action', destination / 'cft_action',
+                    ignore=shutil.ignore_patterns('*.so', '__pycache__'))
