@@ -127,6 +127,40 @@ def round_trip(ros: RosSession, client: Any, tries: int = 10,
     return False
 
 
+def prove_feedback_path(ros: RosSession, client: Any, tries: int = 10,
+                        wait: Optional[Callable[[Callable[[], bool], float], bool]] = None) -> int:
+    """Send order-1 goals until one's feedback reaches ``client``; return how many were sent.
+
+    Every test that counts feedback calls this first (``make_client`` of test_action_client does
+    it for its clients). A goal response proves the goal service, not the feedback path: the
+    server's feedback writer discovers the client's reader on its own, and a feedback message
+    published before that match is gone, as for plain rclpy. Each goal's result is asked for only
+    once its feedback arrived (or did not within 2 s), so that feedback is not dropped for racing
+    the result; when this returns, every goal it sent has its result. Counters read afterwards
+    include these goals: a test counts from a snapshot taken after this call.
+
+    :param wait: how to wait, ``ros.spin_until`` unless an executor already spins in another thread.
+    """
+    wait = wait or ros.spin_until
+    answered = 0
+    for sent in range(1, tries + 1):
+        received: list[Any] = []
+        future = client.send_goal_async(Fibonacci.Goal(order=1), feedback_callback=received.append)
+        if not wait(future.done, 2):
+            continue  # a goal response dropped before the services matched (round_trip)
+        answered += 1
+        handle = future.result()
+        assert handle.accepted, 'the server rejected an order-1 goal'
+        arrived = wait(lambda received=received: bool(received), 2)
+        result = handle.get_result_async()
+        assert wait(result.done, 20), 'an accepted order-1 goal got no result in 20 s'
+        if arrived:
+            return sent
+    state = getattr(client, 'feedback_filter_state', None)
+    raise AssertionError(f'no feedback reached the client in {tries} goals ({answered} answered); '
+                         f'its filter: {state}')
+
+
 def server_evidence(server: Proc) -> str:
     """What a server was doing when a client's goals went unanswered, for an assertion's message.
 
