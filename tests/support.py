@@ -12,10 +12,12 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
 import pytest
+import rclpy
 from test_msgs.action import Fibonacci
 
 from cft_action import guard
@@ -127,21 +129,35 @@ def round_trip(ros: RosSession, client: Any, tries: int = 10,
     return False
 
 
-def prove_feedback_path(ros: RosSession, client: Any, tries: int = 10,
-                        wait: Optional[Callable[[Callable[[], bool], float], bool]] = None) -> int:
+def node_waiter(node: Any) -> Callable[[Callable[[], bool], float], bool]:
+    """``wait(predicate, timeout)`` for a process with one node and no executor of its own (the
+    client processes of tests/helpers): spins the node until ``predicate()`` holds, bounded."""
+    def wait(predicate: Callable[[], bool], timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                return predicate()
+            rclpy.spin_once(node, timeout_sec=0.05)
+        return True
+    return wait
+
+
+def prove_feedback_path(wait: Callable[[Callable[[], bool], float], bool], client: Any,
+                        tries: int = 10) -> int:
     """Send order-1 goals until one's feedback reaches ``client``; return how many were sent.
 
-    Every test that counts feedback calls this first (``make_client`` of test_action_client does
-    it for its clients). A goal response proves the goal service, not the feedback path: the
-    server's feedback writer discovers the client's reader on its own, and a feedback message
-    published before that match is gone, as for plain rclpy. Each goal's result is asked for only
-    once its feedback arrived (or did not within 2 s), so that feedback is not dropped for racing
-    the result; when this returns, every goal it sent has its result. Counters read afterwards
-    include these goals: a test counts from a snapshot taken after this call.
+    Every test that counts feedback calls this first: ``make_client`` of test_action_client does
+    it for its clients, and the client processes of tests/helpers before they say ``READY``. A
+    goal response proves the goal service, not the feedback path: the server's feedback writer
+    discovers the client's reader on its own, and a feedback message published before that match
+    is gone, as for plain rclpy. Each goal's result is asked for only once its feedback arrived
+    (or did not within 2 s), so that its feedback is not dropped for racing the result; when this
+    returns, every goal it sent has its result. Counters read afterwards include these goals: a
+    test counts from a snapshot taken after this call.
 
-    :param wait: how to wait, ``ros.spin_until`` unless an executor already spins in another thread.
+    :param wait: ``wait(predicate, timeout)``, which spins the client's node (``ros.spin_until``)
+        unless an executor already spins it in another thread; returns whether ``predicate`` held.
     """
-    wait = wait or ros.spin_until
     answered = 0
     for sent in range(1, tries + 1):
         received: list[Any] = []

@@ -47,12 +47,24 @@ def server():
 
 
 def run_clients(server, action, mode, clients, goals, order):
-    children = [helper_process('tests.helpers.fib_client', [action, mode, goals, order])
-                for _ in range(clients)]
+    """Client processes (tests/helpers/fib_client.py), one after another ready, then all sending
+    their goals; their reports. Each proved its feedback path before it was ready, so the server
+    published feedback before the goals: ``server_published_since_ready`` is what it published
+    after that client was ready, ``server_published_since_go`` what it published for the goals."""
+    children, published_at_ready = [], []
     try:
+        for _ in range(clients):
+            children.append(helper_process('tests.helpers.fib_client',
+                                           [action, mode, goals, order]))
+            published_at_ready.append(server_published(server))
+        published_at_go = server_published(server)
         for child in children:
             child.send('go')
-        return [json.loads(c.expect('RESULT', timeout=90).split(' ', 1)[1]) for c in children]
+        reports = [json.loads(c.expect('RESULT', timeout=90).split(' ', 1)[1]) for c in children]
+        published = server_published(server)
+        return [{**report, 'server_published_since_ready': published - ready,
+                 'server_published_since_go': published - published_at_go}
+                for report, ready in zip(reports, published_at_ready)]
     finally:
         for child in children:
             child.stop()
@@ -72,23 +84,24 @@ def test_three_clients_each_get_exactly_their_own_feedback(ros, mode, guarded):
     child = start_server(action, guarded=guarded)
     try:
         reports = run_clients(child, action, mode, clients, goals, order)
-        published = server_published(child)
         assert child.poll() is None, 'server died'
     finally:
         child.stop()
     own = goals * order
-    assert published == clients * own
     for report in reports:
+        assert report['server_published_since_go'] == clients * own
         assert report['results'] == goals
         assert report['complete_goals'] == goals, report
         assert report['own_received'] == own
         assert report['misrouted'] == 0
         if mode == 'off':
             assert not report['active'] and report['reason'] == 'feedback_filter is off'
-            assert report['taken'] == published
+            assert report['taken'] - report['proof_taken'] == \
+                report['server_published_since_ready'], report
         else:
             assert report['active'], report['reason']
-            assert report['taken'] == own, 'foreign feedback was taken from rcl'
+            assert report['taken'] - report['proof_taken'] == own, \
+                f'foreign feedback was taken from rcl: {report}'
             assert report['dropped'] == 0
 
 
@@ -116,7 +129,7 @@ def test_many_concurrent_goals_keep_the_filter_active(ros, mode, goals):
     # goals mode holds a request whose UUID came with a filter update until the server's writer
     # has the update, so the feedback the server publishes at once arrives too
     assert report['complete_goals'] == goals, json.dumps(report)
-    assert report['taken'] == report['own_received'] == goals * 6
+    assert report['taken'] - report['proof_taken'] == report['own_received'] == goals * 6
     assert report['arrival_timeouts'] == 0
     if mode == 'client':
         assert report['updates'] == report['held_goals'] == 0
@@ -132,7 +145,7 @@ def make_client(ros, action, **kwargs):
     its counters include that proof's goals, so a test counts from a snapshot."""
     client = ActionClient(ros.node, Fibonacci, action, **kwargs)
     assert client.wait_for_server(timeout_sec=20)
-    prove_feedback_path(ros, client)
+    prove_feedback_path(ros.spin_until, client)
     return client
 
 
@@ -392,7 +405,7 @@ def test_multithreaded_executor_with_goals_sent_from_another_thread(server):
         # send_goal waits for ever on a goal response that was lost: prove the service (and the
         # feedback path, which the test counts) first.
         assert round_trip(ros, client, wait=wait_until), server_evidence(server_proc)
-        prove_feedback_path(ros, client, wait=wait_until)
+        prove_feedback_path(wait_until, client)
         lock = threading.Lock()
         received: dict[int, list[int]] = {}
 

@@ -193,7 +193,7 @@ def test_feedback_published_after_the_result_is_not_delivered(ros, mode):
     try:
         client = ActionClient(ros.node, Fibonacci, action, feedback_filter=mode)
         assert client.wait_for_server(timeout_sec=20)
-        warm_ups = prove_feedback_path(ros, client)
+        warm_ups = prove_feedback_path(ros.spin_until, client)
         # Each warm-up goal's own late message comes and is dropped: count from after them.
         assert ros.spin_until(lambda: client.feedback_filter_state.feedback_dropped == warm_ups,
                               late_s + 10)
