@@ -224,3 +224,37 @@ def copy_package(destination: Path) -> None:
             shutil.copy2(source, destination / name)
     shutil.copytree(ROOT / 'cft_action', destination / 'cft_action',
                     ignore=shutil.ignore_patterns('*.so', '__pycache__'))
+
+
+def prove_parameter_events(ros: RosSession, handler: Any, nodes: Proc, names: Sequence[str],
+                           timeout: float = 15.0) -> str:
+    """Return once an event of each of ``names`` got through the handler's current filter.
+
+    The proof of the event path for every test that counts parameter events: a callback of a
+    handler that only was created, or whose filter only was changed, proves nothing, since the
+    writers match the reader, and learn of a filter change, by discovery, and until then apply
+    the previous filter. ``nodes`` is a :mod:`harness.param_nodes` process. Each name must
+    already be watched: a ``sync`` parameter callback on it does not change the filter, and its
+    first call proves that the node's writer has the current filter. Returns what it took, for
+    the message of a later failure.
+    """
+    seen: set[str] = set()
+    handles = [handler.add_parameter_callback('sync', n, lambda p, n=n: seen.add(n))
+               for n in names]
+    updates = handler.parameter_event_filter_state.updates
+    started = time.monotonic()
+    rounds = 0
+    try:
+        deadline = started + timeout
+        while seen != set(names) and time.monotonic() < deadline:
+            rounds += 1
+            for name in set(names) - seen:
+                nodes.request(f'set {name} sync 1', 'SET')
+            ros.spin_until(lambda: seen == set(names), timeout=0.3)
+        assert seen == set(names), f'no event from {set(names) - seen} within {timeout} s'
+    finally:
+        for handle in handles:
+            handler.remove_parameter_callback(handle)
+    assert handler.parameter_event_filter_state.updates == updates, 'the proof changed the filter'
+    return (f'the event path of {sorted(names)} proven in {rounds} rounds, '
+            f'{time.monotonic() - started:.3f} s')
