@@ -123,8 +123,8 @@ def test_only_guarded_nodes_filter_on_their_side(ros, guarded):
         reader = handler._filter.reader
         judged = reader.reader_verdicts
         sent = burst(ros, handler, child, expected=BURST, proof=proof)
-        assert sent.received == BURST, sent  # the watched node's only
-        assert values == list(range(1, BURST + 1)), sent
+        assert sent.received == BURST, sent.evidence  # the watched node's only
+        assert values == list(range(1, BURST + 1)), sent.evidence
         state = handler.parameter_event_filter_state
         if guarded:
             assert reader.reader_verdicts == judged, 'the writer sent events the filter rejects'

@@ -88,13 +88,10 @@ def in_force(ros, handler, names, timeout=SYNC_TIMEOUT):
 
 
 class Burst(NamedTuple):
-    """What one burst delivered; as a string, the evidence that a failure's message carries."""
+    """What one burst delivered, and the evidence that a failure's message carries."""
 
     received: int
     evidence: str
-
-    def __str__(self) -> str:
-        return self.evidence
 
 
 def burst(ros, handler, child, count=BURST, expected=0, settle=1.0, *, proof: str = '',
@@ -167,9 +164,9 @@ def test_callbacks_fire_for_watched_nodes_only_and_miss_nothing(ros, start_nodes
                  recorder=recorder)
 
     for name in watched:
-        assert recorder.values[name] == list(range(1, BURST + 1)), f'{name}\n{sent}'
+        assert recorder.values[name] == list(range(1, BURST + 1)), f'{name}\n{sent.evidence}'
     # The unwatched nodes' events never reached this process: filtered by their writers.
-    assert sent.received == len(watched) * BURST, sent
+    assert sent.received == len(watched) * BURST, sent.evidence
     state = handler.parameter_event_filter_state
     assert state.watched_nodes == tuple(sorted(watched))
     assert state.updates == 2
@@ -200,8 +197,8 @@ def test_adding_and_removing_callbacks_grows_and_shrinks_the_filter(ros, start_n
     assert handler.parameter_event_filter_state.updates == 2
     proof = prove_parameter_events(ros, handler, child, [a, b])
     sent = burst(ros, handler, child, expected=2 * BURST, proof=proof, recorder=recorder)
-    assert sent.received == 2 * BURST, sent
-    assert recorder.values[b] == list(range(1, BURST + 1)), sent
+    assert sent.received == 2 * BURST, sent.evidence
+    assert recorder.values[b] == list(range(1, BURST + 1)), sent.evidence
 
     # Shrink: b leaves the filter. Adding c right after proves, once c's events arrive, that the
     # writers (all in one participant) have the newer filter, which has no b either.
@@ -211,9 +208,9 @@ def test_adding_and_removing_callbacks_grows_and_shrinks_the_filter(ros, start_n
     proof = prove_parameter_events(ros, handler, child, [a, c])
     recorder.values[b].clear()
     sent = burst(ros, handler, child, expected=2 * BURST, proof=proof, recorder=recorder)
-    assert sent.received == 2 * BURST, sent
-    assert recorder.values[b] == [], sent
-    assert recorder.values[c] == list(range(1, BURST + 1)), sent
+    assert sent.received == 2 * BURST, sent.evidence
+    assert recorder.values[b] == [], sent.evidence
+    assert recorder.values[c] == list(range(1, BURST + 1)), sent.evidence
     assert handler.parameter_event_filter_state.updates == 4
 
     handler.remove_parameter_callback(extra)
@@ -242,8 +239,9 @@ def test_node_names_that_need_quoting(ros, start_nodes, prefix):
     assert child.request('matched 1', 'MATCHED') == 'MATCHED'
     proof = prove_parameter_events(ros, handler, child, [tricky, other])
     sent = burst(ros, handler, child, expected=2 * BURST, proof=proof, recorder=recorder)
-    assert sent.received == 2 * BURST, sent
-    assert recorder.values[tricky] == recorder.values[other] == list(range(1, BURST + 1)), sent
+    assert sent.received == 2 * BURST, sent.evidence
+    assert recorder.values[tricky] == recorder.values[other] == list(range(1, BURST + 1)), \
+        sent.evidence
 
 
 def test_unquotable_node_name_is_left_out_of_the_filter(ros):
@@ -301,8 +299,8 @@ def test_user_expression_with_syntax_error_raises_naming_it(ros, start_nodes, pr
     assert child.request('matched 1', 'MATCHED') == 'MATCHED'
     proof = prove_parameter_events(ros, handler, child, [a])
     sent = burst(ros, handler, child, expected=BURST, proof=proof, recorder=recorder)
-    assert sent.received == BURST, sent
-    assert recorder.values[a] == list(range(1, BURST + 1)), sent
+    assert sent.received == BURST, sent.evidence
+    assert recorder.values[a] == list(range(1, BURST + 1)), sent.evidence
 
 
 def test_user_expression_and_event_callbacks(ros, start_nodes, prefix):
@@ -324,7 +322,7 @@ def test_user_expression_and_event_callbacks(ros, start_nodes, prefix):
     proof = prove_parameter_events(ros, handler, child, [a, b, c])
     events.clear()
     sent = burst(ros, handler, child, expected=3 * BURST, proof=proof, recorder=recorder)
-    assert sorted(set(events)) == [a, b, c] and len(events) == 3 * BURST, sent
+    assert sorted(set(events)) == [a, b, c] and len(events) == 3 * BURST, sent.evidence
 
     # A user expression, bare names quoted automatically; it wins over the event callback.
     handler.set_parameter_event_filter('node = %0 OR node = %1', [a, c])
@@ -339,7 +337,7 @@ def test_user_expression_and_event_callbacks(ros, start_nodes, prefix):
     proof = prove_parameter_events(ros, handler, child, [a, c])
     events.clear()
     sent = burst(ros, handler, child, expected=2 * BURST, proof=proof, recorder=recorder)
-    assert sorted(set(events)) == [a, c] and len(events) == 2 * BURST, sent
+    assert sorted(set(events)) == [a, c] and len(events) == 2 * BURST, sent.evidence
 
     # Clearing it hands the filter back to the handler: all nodes while the event callback lives.
     handler.set_parameter_event_filter('')
@@ -383,7 +381,7 @@ def test_a_change_is_unconfirmed_until_the_publishers_have_it(ros, start_nodes, 
     proof = prove_parameter_events(ros, handler, child, [a, b])
     events.clear()
     sent = burst(ros, handler, child, expected=2 * BURST, proof=proof)
-    assert sorted(set(events)) == [a, b] and len(events) == 2 * BURST, sent
+    assert sorted(set(events)) == [a, b] and len(events) == 2 * BURST, sent.evidence
 
 
 def test_use_sim_time_still_flips_the_clock(ros, start_nodes, prefix):
