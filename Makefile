@@ -36,7 +36,8 @@ test: $(STAMP)
 	$(PY) -m pytest $(TESTS)
 
 # ruff and mypy take their settings from pyproject.toml. ruff checks all the code (the library,
-# harness/, benchmarks/, tests/, demos/, compat/, setup.py; not the venvs, which it skips).
+# harness/, benchmarks/, tests/, demos/, compat/, setup.py; not the venvs, which it skips); mypy
+# the library, harness/, demos/ and compat/.
 lint: $(STAMP)
 	$(PY) -m ruff check .
 	$(PY) -m mypy

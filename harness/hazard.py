@@ -172,8 +172,9 @@ def role_exitproc(action: str, k: int, settle: float) -> int:
 
 
 #: The child processes of a cell: ``python -m harness.hazard NAME ARGS...``.
-ROLES = {'goal': role_goal, 'update': role_update, 'destroy': role_destroy,
-         'create': role_create, 'exitproc': role_exitproc}
+ROLES: dict[str, Callable[..., int]] = {
+    'goal': role_goal, 'update': role_update, 'destroy': role_destroy, 'create': role_create,
+    'exitproc': role_exitproc}
 
 
 # ==================================================================================================
@@ -277,7 +278,8 @@ def run_cell(cell: Cell, opts: argparse.Namespace, domain: Optional[int] = None)
             server = started[0]
             if not server_dead_before_stop and server.poll() not in (0, None):
                 outcome['server_at_stop'] = signal_name(server.poll())
-            if server.poll() is not None and server.poll() < 0:
+            exit_status = server.poll()
+            if exit_status is not None and exit_status < 0:
                 core, frames = core_backtrace(workdir, server.pid, keep=opts.keep_cores)
                 outcome['core'] = core
                 outcome['backtrace'] = frames

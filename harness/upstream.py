@@ -134,6 +134,8 @@ class UpstreamEquivalentActionClient(RclpyActionClient):
                 pass  # as upstream: it only records the error
 
     def _set(self, expression: str, parameters: list[str]) -> None:
+        # Only reached while not disabled, and a client without the subscription is disabled.
+        assert self._feedback_ptr is not None
         with self._client_handle:
             _rcl.set_content_filter(self._feedback_ptr, expression, parameters)
         self.filter_sets += 1
