@@ -233,10 +233,11 @@ def prove_parameter_events(ros: RosSession, handler: Any, nodes: Proc, names: Se
     The proof of the event path for every test that counts parameter events: a callback of a
     handler that only was created, or whose filter only was changed, proves nothing, since the
     writers match the reader, and learn of a filter change, by discovery, and until then apply
-    the previous filter. ``nodes`` is a :mod:`harness.param_nodes` process. Each name must
-    already be watched: a ``sync`` parameter callback on it does not change the filter, and its
-    first call proves that the node's writer has the current filter. Returns what it took, for
-    the message of a later failure.
+    the previous filter. ``nodes`` is a :mod:`harness.param_nodes` process. It adds a ``sync``
+    parameter callback on each name, whose first call proves that the node's writer has the
+    current filter; that must not change the filter (asserted), so with a filter on the watched
+    nodes (mode ``'nodes'``) each name must already be watched. Returns what it took, for the
+    message of a later failure.
     """
     seen: set[str] = set()
     handles = [handler.add_parameter_callback('sync', n, lambda p, n=n: seen.add(n))
