@@ -13,8 +13,8 @@ carries 200 events per second. Two handler processes watch the same 2 of those n
 Each prints the events its subscription received, the parameter callbacks that fired, and the CPU
 time its whole process used (all threads, DDS included) over the same measurement window.
 
-    .venv/bin/python demos/parameter_events.py            # about 35 s
-    .venv/bin/python demos/parameter_events.py --seconds 5 --soak 250 --soak-period 0.05 --no-guard
+    .venv/bin/python -m demos.parameter_events            # about 35 s
+    .venv/bin/python -m demos.parameter_events --seconds 5 --soak 250 --soak-period 0.05 --no-guard
 
 Every filter change (and every filtered reader that comes or goes) is an event at every
 ``/parameter_events`` writer, that is, at every node; with Fast DDS 2.14 such an event can crash a
@@ -41,6 +41,7 @@ from typing import Any, Optional, Union
 
 from harness.domain import unused_domain
 
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the repository
 NODES = 20
 RATE_HZ = 10.0
 NAMESPACE = '/demo_farm'
@@ -176,9 +177,10 @@ class Child:
         self.args = args
         self.lines: queue.Queue[str] = queue.Queue()
         self.proc = subprocess.Popen(
-            [sys.executable, '-u', os.path.abspath(__file__), *args], stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-            start_new_session=True)
+            # A module of the repository, as the demo itself: harness/ is imported from there.
+            [sys.executable, '-u', '-m', 'demos.parameter_events', *args], cwd=ROOT,
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=env, start_new_session=True)
         self.stderr: list[str] = []
         threading.Thread(target=self._pump, args=(self.proc.stdout, self.lines.put),
                          daemon=True).start()
