@@ -35,9 +35,11 @@ TESTS ?=
 test: $(STAMP)
 	$(PY) -m pytest $(TESTS)
 
-# ruff and mypy take their settings from pyproject.toml.
+# ruff and mypy take their settings from pyproject.toml. ruff checks all the code (the library,
+# harness/, benchmarks/, tests/, demos/, compat/, setup.py; not the venvs, which it skips); mypy
+# the library, harness/, demos/ and compat/.
 lint: $(STAMP)
-	$(PY) -m ruff check cft_action
+	$(PY) -m ruff check .
 	$(PY) -m mypy
 
 demo: $(STAMP)
@@ -47,18 +49,17 @@ bench: $(STAMP)
 	$(PY) -m benchmarks.sweep
 
 # The test files below, on Fast DDS stacks other than the wheels' (docs/COMPATIBILITY.md): apt's
-# (2.14.6, SECURITY=ON, with rmw_fastrtps rebuilt against it) and the 2.14.x branch head. Not part
-# of `make test`. A stack missing from COMPAT_CACHE is built by COMPAT_BUILD, a script kept outside
-# this repository; building one took 20 minutes at nice 19 on 2 cores (Fast DDS 17, rmw_fastrtps 2.5;
-# 15 for the second stack, with ccache), and the tests then take 3-4 minutes a stack. Results: COMPAT_CACHE/results/<stack>-<time>/.
+# (2.14.6, SECURITY=ON, with its own rmw_fastrtps) and the 2.14.x branch head. Not part of
+# `make test`. Each stack is a prebuilt directory COMPAT_CACHE/<stack> (what it holds:
+# docs/COMPATIBILITY.md, "The stacks"); a missing one fails the run. The tests take 3-4 minutes a
+# stack. Results: COMPAT_CACHE/results/<stack>-<time>/.
 COMPAT_CACHE ?= /work/.cache/cft-stack
 COMPAT_STACKS ?= apt-2.14.6 head-2.14.x
 COMPAT_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_uuid_class.py \
     tests/test_node_class.py tests/test_action_client.py
-COMPAT_BUILD ?= $(COMPAT_CACHE)/build_stack.sh
 
 compat: $(STAMP)
-	COMPAT_BUILD=$(COMPAT_BUILD) compat/run.sh $(VENV) $(COMPAT_CACHE) "$(COMPAT_STACKS)" $(COMPAT_TESTS)
+	compat/run.sh $(VENV) $(COMPAT_CACHE) "$(COMPAT_STACKS)" $(COMPAT_TESTS)
 
 clean:
 	rm -rf .venv .venv-3.* build *.egg-info cft_action/*.so .mypy_cache .ruff_cache

@@ -64,7 +64,8 @@ def run(runs: int, mode: str) -> dict:
             before = handler.parameter_event_filter_state.events_received
             nodes.request(f'burst {BURST}', 'BURST')
             expected = BURST * len(names)
-            ros.spin_until(lambda: handler.parameter_event_filter_state.events_received - before
+            ros.spin_until(lambda handler=handler, before=before, expected=expected:
+                           handler.parameter_event_filter_state.events_received - before
                            >= expected, 5.0)
             received = handler.parameter_event_filter_state.events_received - before
             if received < expected:

@@ -5,10 +5,10 @@ received the goal response. A filter that learns of a goal only on acceptance (t
 filters that feedback out; one that knows the goal before the request is sent does not, as long as
 the filter change reaches the server's writer before the goal request does.
 
-For each configuration (``client``, ``goals``, ``upstream``, ``rclpy``), one client sends GOALS goals
-of ORDER feedback messages to a guarded server (:mod:`harness.server`), either one after another or
-all at once, and counts the goals whose first feedback, and whose every feedback, arrived, and
-how long each goal took from ``send_goal_async`` to its goal response (``accept_ms``)::
+For each configuration (``client``, ``goals``, ``upstream``, ``rclpy``), one client sends GOALS
+goals of ORDER feedback messages to a guarded server (:mod:`harness.server`), either one after
+another or all at once, and counts the goals whose first feedback, and whose every feedback,
+arrived, and how long each goal took from ``send_goal_async`` to its goal response (``accept_ms``)::
 
     python -m benchmarks.first_feedback --goals 200 --order 3
 
@@ -90,7 +90,8 @@ def run_config(config: str, action: str, goals: int, order: int, burst: bool,
         for index in range(goals):
             send(index)
             if not burst:
-                spin_until(executor, lambda: len(results) > index and results[index].done(), 20)
+                spin_until(executor,
+                           lambda index=index: len(results) > index and results[index].done(), 20)
         spin_until(executor, lambda: len(results) == goals and all(r.done() for r in results), 60)
         spin_until(executor, lambda: False, 1.0)  # stragglers
         counters = load_client.filter_counters(client)

@@ -179,9 +179,12 @@ ROLES = {'sink': role_sink, 'pub': role_pub, 'pong': role_pong, 'ping': role_pin
 
 _STANDIN_C = r"""
 #include <stdint.h>
-#define PCNC2 "_ZN8eprosima7fastdds3dds14DataWriterImpl25perform_create_new_changeENS_8fastrtps4rtps12ChangeKind_tEPvRNS4_11WriteParamsERKNS4_16InstanceHandle_tE"
-#define PRFI2 "_ZN8eprosima7fastdds3dds14DataWriterImpl26process_reader_filter_infoERKNS_8fastrtps4rtps6GUID_tERKNS4_15ReaderProxyDataE"
-#define RRF2 "_ZN8eprosima7fastdds3dds14DataWriterImpl20remove_reader_filterERKNS_8fastrtps4rtps6GUID_tE"
+#define PCNC2 "_ZN8eprosima7fastdds3dds14DataWriterImpl25perform_create_new_change" \
+  "ENS_8fastrtps4rtps12ChangeKind_tEPvRNS4_11WriteParamsERKNS4_16InstanceHandle_tE"
+#define PRFI2 "_ZN8eprosima7fastdds3dds14DataWriterImpl26process_reader_filter_info" \
+  "ERKNS_8fastrtps4rtps6GUID_tERKNS4_15ReaderProxyDataE"
+#define RRF2 "_ZN8eprosima7fastdds3dds14DataWriterImpl20remove_reader_filter" \
+  "ERKNS_8fastrtps4rtps6GUID_tE"
 uint32_t pcnc(void *self, int kind, void *data, void *params, const void *handle) __asm__(PCNC2);
 uint32_t pcnc(void *self, int kind, void *data, void *params, const void *handle) {
   (void)self; (void)data; (void)params; (void)handle;

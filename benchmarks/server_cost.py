@@ -75,9 +75,10 @@ class ProfiledRun(CappedRun):
     profile_dir = Path('.')
 
     def window_started(self, clients: list[Any], server_stats: dict[str, Any]) -> None:
-        self.perf_data = self.profile_dir / f'perf-{len(list(self.profile_dir.glob("perf-*")))}.data'
-        self.perf = subprocess.Popen(['perf', 'record', '-F', '1999', '-g', '-p', str(self.server.pid),
-                                      '-o', str(self.perf_data)],
+        runs = len(list(self.profile_dir.glob('perf-*')))
+        self.perf_data = self.profile_dir / f'perf-{runs}.data'
+        self.perf = subprocess.Popen(['perf', 'record', '-F', '1999', '-g',
+                                      '-p', str(self.server.pid), '-o', str(self.perf_data)],
                                      stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
 
     def window_ended(self, clients: list[Any]) -> dict[str, Any]:
@@ -90,8 +91,8 @@ class ProfiledRun(CappedRun):
         by_library = subprocess.run(['perf', 'report', '-i', str(self.perf_data), '--no-children',
                                      '--sort', 'dso', '--stdio', '-g', 'none'],
                                     capture_output=True, text=True, timeout=300).stdout
-        return {'profile': _perf_rows(report)[:25], 'profile_by_library': _perf_rows(by_library)[:12],
-                'perf_data': str(self.perf_data)}
+        return {'profile': _perf_rows(report)[:25],
+                'profile_by_library': _perf_rows(by_library)[:12], 'perf_data': str(self.perf_data)}
 
 
 def _perf_rows(report: str) -> list[str]:

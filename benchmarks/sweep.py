@@ -140,7 +140,7 @@ def run(args: argparse.Namespace) -> Path:
         point_started = time.monotonic()
         try:
             result = load.run_load(spec, args.configs, progress, run_class)
-        except Exception as e:  # keep the sweep going; the failure is a result too
+        except Exception as e:  # noqa: BLE001 (keep the sweep going; the failure is a result too)
             progress(f'point failed: {e}')
             result = {'spec': vars(spec).copy(), 'error': str(e), 'phases': []}
         result['size'] = point['size']

@@ -7,8 +7,7 @@
 # CACHE  the directory that holds the stacks, CACHE/<stack>/install/lib/...
 # STACK  a stack name under CACHE, or `wheels` for the venv's own libraries (the baseline).
 #
-# A missing stack is built by $COMPAT_BUILD (an executable outside this repository, called as
-# `$COMPAT_BUILD STACK CACHE VENV`) if that is set and exists; otherwise this fails and says so.
+# A stack is prebuilt (docs/COMPATIBILITY.md, "The stacks"); a missing one fails and says so.
 # For each stack: its environment (compat/stack_env.sh) is exported, so pytest and every process
 # the tests start load that stack's libfastrtps and rmw_fastrtps; compat/verify_stack.py checks it
 # is really mapped and that plain ROS works on it; then pytest runs the files. Output goes to
@@ -30,18 +29,13 @@ have=$(_ROS_WHEELS_BOOTSTRAP_COMPLETE=0 wheels "$venv")
 for stack in $stacks; do
   dir=$cache/$stack
   if [ "$stack" != wheels ] && [ ! -e "$dir/install/lib/librmw_fastrtps_cpp.so" ]; then
-    if [ -n "${COMPAT_BUILD:-}" ] && [ -x "$COMPAT_BUILD" ]; then
-      echo "== $stack: not built; building it with $COMPAT_BUILD (about 20 min at nice 19 on 2 cores)"
-      "$COMPAT_BUILD" "$stack" "$cache" "$venv" || { echo "== $stack: build FAILED"; status=1; continue; }
-    else
-      echo "== $stack: no stack in $dir, and no COMPAT_BUILD to build it (docs/COMPATIBILITY.md)"
-      status=1; continue
-    fi
+    echo "== $stack: no stack in $dir (install/lib/librmw_fastrtps_cpp.so; docs/COMPATIBILITY.md)"
+    status=1; continue
   fi
   if [ "$stack" != wheels ]; then
     built=$(sed -n 's/^venv_wheels=//p' "$dir/STACK_INFO" | tail -1)
     if [ "$built" != "$have" ]; then
-      echo "== $stack: built against wheels [$built], but $venv has [$have]: rebuild it"
+      echo "== $stack: built against wheels [$built], but $venv has [$have]: not this venv's stack"
       status=1; continue
     fi
   fi

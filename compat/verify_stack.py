@@ -90,6 +90,7 @@ def main() -> int:
 
     server = subprocess.Popen([sys.executable, '-u', '-m', 'compat.verify_stack', stack, 'serve',
                                ACTION], stdout=subprocess.PIPE, text=True)
+    assert server.stdout is not None  # a pipe: Popen(stdout=PIPE)
     try:
         ready = server.stdout.readline().strip()
         check('server_started', ready == 'READY', ready)

@@ -13,15 +13,16 @@ carries 200 events per second. Two handler processes watch the same 2 of those n
 Each prints the events its subscription received, the parameter callbacks that fired, and the CPU
 time its whole process used (all threads, DDS included) over the same measurement window.
 
-    .venv/bin/python demos/parameter_events.py            # about 35 s
-    .venv/bin/python demos/parameter_events.py --seconds 5 --soak 250 --soak-period 0.05 --no-guard
+    .venv/bin/python -m demos.parameter_events            # about 35 s
+    .venv/bin/python -m demos.parameter_events --seconds 5 --soak 250 --soak-period 0.05 --no-guard
 
 Every filter change (and every filtered reader that comes or goes) is an event at every
 ``/parameter_events`` writer, that is, at every node; with Fast DDS 2.14 such an event can crash a
-process that is publishing at that moment (eProsima/Fast-DDS#4878, docs/INTERNALS.md section 10). So the
-nodes' process runs under :mod:`cft_action.guard` unless ``--no-guard`` is given. ``--soak N`` then
-changes the filtered handler's node set 2*N times while the nodes keep publishing, and reports
-whether the nodes' process survived: run it with ``--no-guard`` to see the hazard.
+process that is publishing at that moment (eProsima/Fast-DDS#4878, docs/INTERNALS.md section 10).
+So the nodes' process runs under :mod:`cft_action.guard` unless ``--no-guard`` is given.
+``--soak N`` then changes the filtered handler's node set 2*N times while the nodes keep
+publishing, and reports whether the nodes' process survived: run it with ``--no-guard`` to see
+the hazard.
 
 The demo uses its own ``ROS_DOMAIN_ID`` (random, unless set) and localhost-only discovery.
 """
@@ -36,10 +37,11 @@ import subprocess
 import sys
 import threading
 import time
-from typing import Optional, Union
+from typing import Any, Optional, Union
 
 from harness.domain import unused_domain
 
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))  # the repository
 NODES = 20
 RATE_HZ = 10.0
 NAMESPACE = '/demo_farm'
@@ -98,11 +100,9 @@ def run_handler(kind: str, watched: list[str], extra: str) -> None:
 
     rclpy.init()
     node = Node(f'demo_handler_{kind}')
-    if kind == 'filtered':
-        from cft_action.parameter_events import ParameterEventHandler
-    else:
-        from rclpy.parameter_event_handler import ParameterEventHandler
-    handler = ParameterEventHandler(node)
+    from cft_action.parameter_events import ParameterEventHandler as Filtered
+    from rclpy.parameter_event_handler import ParameterEventHandler as Plain
+    handler = (Filtered if kind == 'filtered' else Plain)(node)
     counts = {'received': 0, 'callbacks': 0}
     seen: set[str] = set()
 
@@ -132,11 +132,11 @@ def run_handler(kind: str, watched: list[str], extra: str) -> None:
 
     base = {'received': 0, 'callbacks': 0, 'cpu': 0.0, 'wall': time.monotonic()}
 
-    def report() -> dict:
-        result = {k: counts[k] - base[k] for k in ('received', 'callbacks')}
+    def report() -> dict[str, Any]:
+        result: dict[str, Any] = {k: counts[k] - base[k] for k in ('received', 'callbacks')}
         result['cpu'] = time.process_time() - base['cpu']
         result['wall'] = time.monotonic() - base['wall']
-        if kind == 'filtered':
+        if isinstance(handler, Filtered):
             state = handler.parameter_event_filter_state
             result.update(mode=state.mode, active=state.active, updates=state.updates,
                           expression=state.expression, parameters=list(state.expression_parameters))
@@ -151,7 +151,7 @@ def run_handler(kind: str, watched: list[str], extra: str) -> None:
                         cpu=time.process_time(), wall=time.monotonic())
         elif command[0] == 'report':
             print(f'REPORT {json.dumps(report())}', flush=True)
-        elif command[0] == 'soak' and kind == 'filtered':
+        elif command[0] == 'soak' and isinstance(handler, Filtered):
             # Grow and shrink the node set: each add or remove of the extra node is one update.
             cycles, period = int(command[1]), float(command[2])
             before = handler.parameter_event_filter_state.updates
@@ -174,11 +174,13 @@ class Child:
     """This script in another process, in one of its child roles, driven by stdin lines."""
 
     def __init__(self, args: list[str], env: Optional[dict] = None) -> None:
+        self.args = args
         self.lines: queue.Queue[str] = queue.Queue()
         self.proc = subprocess.Popen(
-            [sys.executable, '-u', os.path.abspath(__file__), *args], stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=env,
-            start_new_session=True)
+            # A module of the repository, as the demo itself: harness/ is imported from there.
+            [sys.executable, '-u', '-m', 'demos.parameter_events', *args], cwd=ROOT,
+            stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+            env=env, start_new_session=True)
         self.stderr: list[str] = []
         threading.Thread(target=self._pump, args=(self.proc.stdout, self.lines.put),
                          daemon=True).start()
@@ -201,18 +203,23 @@ class Child:
                 continue
             if line.startswith(prefix):
                 return line
-        raise RuntimeError(f'no {prefix!r} from {self.proc.args[3:]} (exit {self.proc.poll()}): '
+        raise RuntimeError(f'no {prefix!r} from {self.args} (exit {self.proc.poll()}): '
                            f'{self.stderr[-5:]}')
 
-    def request(self, line: str, reply: str, timeout: float = 10.0) -> dict:
+    def send(self, line: str) -> None:
+        assert self.proc.stdin is not None  # a pipe: Popen(stdin=PIPE)
         self.proc.stdin.write(line + '\n')
         self.proc.stdin.flush()
+
+    def request(self, line: str, reply: str, timeout: float = 10.0) -> dict:
+        self.send(line)
         return json.loads(self.expect(reply, timeout).split(' ', 1)[1])
 
     def stop(self) -> Optional[int]:
         if self.proc.poll() is None:
             try:
-                self.proc.stdin.close()
+                if self.proc.stdin is not None:
+                    self.proc.stdin.close()
             except OSError:
                 pass
             try:
@@ -263,7 +270,7 @@ def main() -> None:
         handlers = {kind: Child(['--handler', kind, *watched, extra])
                     for kind in ('filtered', 'rclpy')}
         children.extend(handlers.values())
-        for kind, child in handlers.items():
+        for child in handlers.values():
             child.expect('READY', 30)
         for kind, child in handlers.items():
             if child.expect(('WARM', 'COLD'), 35) != 'WARM':
@@ -271,8 +278,7 @@ def main() -> None:
         print('both handlers receive their nodes; measuring', flush=True)
         farm_start = farm.request('stats', 'STATS')
         for child in handlers.values():
-            child.proc.stdin.write('start\n')
-            child.proc.stdin.flush()
+            child.send('start')
         end = time.monotonic() + args.seconds
         while (left := end - time.monotonic()) > 0:
             time.sleep(min(5.0, left))
@@ -299,8 +305,7 @@ def main() -> None:
             print(f'\nsoak: {2 * args.soak} filter updates, one every {args.soak_period:g} s, '
                   f'while the nodes publish (guard {"on" if args.guard else "off"})', flush=True)
             child = handlers['filtered']
-            child.proc.stdin.write(f'soak {args.soak} {args.soak_period}\n')
-            child.proc.stdin.flush()
+            child.send(f'soak {args.soak} {args.soak_period}')
             steps, died_after = 0, None
             deadline = time.monotonic() + 2 * args.soak * args.soak_period + 60
             while True:

@@ -92,7 +92,7 @@ class CountingMixin:
 
     def take_data(self) -> dict:
         """Take as the base class does, and count the feedback or status message taken."""
-        data = super().take_data()
+        data = super().take_data()  # type: ignore[misc]  # the action client after it in the MRO
         feedback = data.get('feedback')
         if feedback is not None:
             if bytes(feedback.goal_id.uuid) in self.own_uuids:
@@ -113,7 +113,7 @@ def recording_feedback(base: type) -> type:
     """A subclass of ``base`` that records in ``feedback_taken`` (a list the caller sets) the goal
     UUID and the counter (``sequence[0]``) of every feedback message taken from rcl."""
 
-    class Counting(base):  # type: ignore[misc, valid-type]
+    class Counting(base):
         def take_data(self) -> dict:
             data = super().take_data()
             feedback = data.get('feedback')

@@ -99,8 +99,8 @@ def role_update(action: str, count: int, interval: float, server_pid: int) -> in
         say('ERROR no feedback subscription:', reason)
         return 2
     # The class a default client uses (the library's own, unless CFT_ACTION_WRITER_FILTERING=any).
-    filter_class = (_rcl.UUID_FILTER_CLASS
-                    if os.environ.get('CFT_ACTION_WRITER_FILTERING', 'guarded') == 'guarded' else None)
+    guarded = os.environ.get('CFT_ACTION_WRITER_FILTERING', 'guarded') == 'guarded'
+    filter_class = _rcl.UUID_FILTER_CLASS if guarded else None
     # The first filter recreates the reader: before use.
     _rcl.set_content_filter(ptr, NEVER[0], filter_class=filter_class)
     if not client.wait_for_server(timeout_sec=20.0):
@@ -172,8 +172,9 @@ def role_exitproc(action: str, k: int, settle: float) -> int:
 
 
 #: The child processes of a cell: ``python -m harness.hazard NAME ARGS...``.
-ROLES = {'goal': role_goal, 'update': role_update, 'destroy': role_destroy,
-         'create': role_create, 'exitproc': role_exitproc}
+ROLES: dict[str, Callable[..., int]] = {
+    'goal': role_goal, 'update': role_update, 'destroy': role_destroy, 'create': role_create,
+    'exitproc': role_exitproc}
 
 
 # ==================================================================================================
@@ -277,7 +278,8 @@ def run_cell(cell: Cell, opts: argparse.Namespace, domain: Optional[int] = None)
             server = started[0]
             if not server_dead_before_stop and server.poll() not in (0, None):
                 outcome['server_at_stop'] = signal_name(server.poll())
-            if server.poll() is not None and server.poll() < 0:
+            exit_status = server.poll()
+            if exit_status is not None and exit_status < 0:
                 core, frames = core_backtrace(workdir, server.pid, keep=opts.keep_cores)
                 outcome['core'] = core
                 outcome['backtrace'] = frames

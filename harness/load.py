@@ -563,7 +563,7 @@ def run_load(spec: LoadSpec, configs: Sequence[str], progress: Progress = print,
 def environment_facts() -> dict[str, Any]:
     """Machine and versions, for a result file."""
     from importlib import metadata
-    versions = {}
+    versions: dict[str, Optional[str]] = {}
     for dist in ('ros-jazzy-rclpy', 'rclpy', 'ros-rcl', 'ros-rcl-action', 'ros-rmw-fastrtps-cpp',
                  'ros-fastrtps', 'cft-action', 'matplotlib'):
         try:
@@ -606,8 +606,8 @@ def format_table(result: dict[str, Any]) -> str:
                      fmt(s['latency_p50_ms'], '.2f'), fmt(s['latency_p99_ms'], '.2f'),
                      fmt(s['achieved_rate_hz'], '.0f'), fmt(s['server_msgs_per_s'], '.0f'),
                      fmt(s['server_cpu_ms_per_msg'], '.3f')))
-    ratio_rows = [('ratio to plain', 'foreign', 'bytes', 'CPU', 'p50', 'p99', 'srv msg/s',
-                   'srv ms/msg')]
+    ratio_rows: list[tuple[str, ...]] = [('ratio to plain', 'foreign', 'bytes', 'CPU', 'p50',
+                                          'p99', 'srv msg/s', 'srv ms/msg')]
     for phase in result['phases']:
         r = phase['summary'].get('ratio_to_plain')
         if r:

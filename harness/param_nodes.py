@@ -13,6 +13,7 @@ line:
                      service; replies REMOTE OK or REMOTE FAIL <reason>
 """
 
+import functools
 import sys
 import threading
 
@@ -32,6 +33,11 @@ def make_node(fully_qualified_name: str) -> Node:
     node.declare_parameter('value', 0)
     node.declare_parameter('sync', 0)
     return node
+
+
+def subscribed(nodes: list[Node], wanted: int) -> bool:
+    """Whether every node's /parameter_events writer has at least ``wanted`` readers."""
+    return all(n._parameter_event_publisher.get_subscription_count() >= wanted for n in nodes)
 
 
 def remote_set(client: AsyncParameterClient, name: str, value: bool) -> str:
@@ -77,10 +83,8 @@ def main() -> None:
                     node.set_parameters([Parameter('value', value=i)])
             print(f'BURST {count}', flush=True)
         elif words[0] == 'matched':
-            wanted = int(words[1])
-            matched = wait_until(lambda: all(
-                n._parameter_event_publisher.get_subscription_count() >= wanted
-                for n in nodes.values()))
+            matched = wait_until(functools.partial(subscribed, list(nodes.values()),
+                                                   int(words[1])))
             print('MATCHED' if matched else 'TIMEOUT', flush=True)
         elif words[0] == 'remote':
             if words[1] not in clients:

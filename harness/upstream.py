@@ -1,6 +1,7 @@
 """An emulation of the upstream (Rolling) feedback filter, for comparison only: not library code.
 
-Upstream (rcl#1287, rclpy#1633, docs/INTERNALS.md section 12), with ``enable_feedback_msg_optimization``:
+Upstream (rcl#1287, rclpy#1633, docs/INTERNALS.md section 12), with
+``enable_feedback_msg_optimization``:
 
 - the filter is ``(goal_id.uuid[0] = %0 AND ... goal_id.uuid[15] = %15) OR (... %16 ...)``: 16
   parameters per goal, goals OR-ed, each parameter one UUID byte in decimal;
@@ -133,6 +134,8 @@ class UpstreamEquivalentActionClient(RclpyActionClient):
                 pass  # as upstream: it only records the error
 
     def _set(self, expression: str, parameters: list[str]) -> None:
+        # Only reached while not disabled, and a client without the subscription is disabled.
+        assert self._feedback_ptr is not None
         with self._client_handle:
             _rcl.set_content_filter(self._feedback_ptr, expression, parameters)
         self.filter_sets += 1

@@ -12,10 +12,12 @@ import re
 import shutil
 import subprocess
 import sys
+import time
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
 import pytest
+import rclpy
 from test_msgs.action import Fibonacci
 
 from cft_action import guard
@@ -129,6 +131,54 @@ def round_trip(ros: RosSession, client: Any, tries: int = 10,
     return False
 
 
+def node_waiter(node: Any) -> Callable[[Callable[[], bool], float], bool]:
+    """``wait(predicate, timeout)`` for a process with one node and no executor of its own (the
+    client processes of tests/helpers): spins the node until ``predicate()`` holds, bounded."""
+    def wait(predicate: Callable[[], bool], timeout: float) -> bool:
+        deadline = time.monotonic() + timeout
+        while not predicate():
+            if time.monotonic() > deadline:
+                return predicate()
+            rclpy.spin_once(node, timeout_sec=0.05)
+        return True
+    return wait
+
+
+def prove_feedback_path(wait: Callable[[Callable[[], bool], float], bool], client: Any,
+                        tries: int = 10) -> int:
+    """Send order-1 goals until one's feedback reaches ``client``; return how many were sent.
+
+    Every test that counts feedback calls this first: ``make_client`` of test_action_client does
+    it for its clients, and the client processes of tests/helpers before they say ``READY``. A
+    goal response proves the goal service, not the feedback path: the server's feedback writer
+    discovers the client's reader on its own, and a feedback message published before that match
+    is gone, as for plain rclpy. Each goal's result is asked for only once its feedback arrived
+    (or did not within 2 s), so that its feedback is not dropped for racing the result; when this
+    returns, every goal it sent has its result. Counters read afterwards include these goals: a
+    test counts from a snapshot taken after this call.
+
+    :param wait: ``wait(predicate, timeout)``, which spins the client's node (``ros.spin_until``)
+        unless an executor already spins it in another thread; returns whether ``predicate`` held.
+    """
+    answered = 0
+    for sent in range(1, tries + 1):
+        received: list[Any] = []
+        future = client.send_goal_async(Fibonacci.Goal(order=1), feedback_callback=received.append)
+        if not wait(future.done, 2):
+            continue  # a goal response dropped before the services matched (round_trip)
+        answered += 1
+        handle = future.result()
+        assert handle.accepted, 'the server rejected an order-1 goal'
+        arrived = wait(lambda received=received: bool(received), 2)
+        result = handle.get_result_async()
+        assert wait(result.done, 20), 'an accepted order-1 goal got no result in 20 s'
+        if arrived:
+            return sent
+    state = getattr(client, 'feedback_filter_state', None)
+    raise AssertionError(f'no feedback reached the client in {tries} goals ({answered} answered); '
+                         f'its filter: {state}')
+
+
 def server_evidence(server: Proc) -> str:
     """What a server was doing when a client's goals went unanswered, for an assertion's message.
 
@@ -156,3 +206,58 @@ def result_of(ros: RosSession, goal_handle: Any) -> Any:
     future = goal_handle.get_result_async()
     assert ros.spin_until(future.done, 30)
     return future.result()
+
+
+ROOT = Path(__file__).resolve().parent.parent
+# What the package's build reads: setup.py builds the extensions, pyproject.toml has the metadata
+# (and reads README.md), package.xml and resource/ make it an ament_python package.
+PACKAGE_FILES = ('setup.py', 'pyproject.toml', 'package.xml', 'README.md', 'resource')
+
+
+def copy_package(destination: Path) -> None:
+    """Copy what building the package reads into ``destination``: a clone's sources, without
+    what an editable install built in place."""
+    destination.mkdir(parents=True)
+    for name in PACKAGE_FILES:
+        source = ROOT / name
+        if source.is_dir():
+            shutil.copytree(source, destination / name)
+        else:
+            shutil.copy2(source, destination / name)
+    shutil.copytree(ROOT / 'cft_action', destination / 'cft_action',
+                    ignore=shutil.ignore_patterns('*.so', '__pycache__'))
+
+
+def prove_parameter_events(ros: RosSession, handler: Any, nodes: Proc, names: Sequence[str],
+                           timeout: float = 15.0) -> str:
+    """Return once an event of each of ``names`` got through the handler's current filter.
+
+    The proof of the event path for every test that counts parameter events: a callback of a
+    handler that only was created, or whose filter only was changed, proves nothing, since the
+    writers match the reader, and learn of a filter change, by discovery, and until then apply
+    the previous filter. ``nodes`` is a :mod:`harness.param_nodes` process. It adds a ``sync``
+    parameter callback on each name, whose first call proves that the node's writer has the
+    current filter; that must not change the filter (asserted), so with a filter on the watched
+    nodes (mode ``'nodes'``) each name must already be watched. Returns what it took, for the
+    message of a later failure.
+    """
+    seen: set[str] = set()
+    handles = [handler.add_parameter_callback('sync', n, lambda p, n=n: seen.add(n))
+               for n in names]
+    updates = handler.parameter_event_filter_state.updates
+    started = time.monotonic()
+    rounds = 0
+    try:
+        deadline = started + timeout
+        while seen != set(names) and time.monotonic() < deadline:
+            rounds += 1
+            for name in set(names) - seen:
+                nodes.request(f'set {name} sync 1', 'SET')
+            ros.spin_until(lambda: seen == set(names), timeout=0.3)
+        assert seen == set(names), f'no event from {set(names) - seen} within {timeout} s'
+    finally:
+        for handle in handles:
+            handler.remove_parameter_callback(handle)
+    assert handler.parameter_event_filter_state.updates == updates, 'the proof changed the filter'
+    return (f'the event path of {sorted(names)} proven in {rounds} rounds, '
+            f'{time.monotonic() - started:.3f} s')

@@ -24,8 +24,8 @@ from cft_action.client import FINISHED_GOAL_GRACE
 from cft_action.filters import NEVER_MATCH
 from harness.polling import wait_until
 from harness.ros import RosSession, unique_name
-from tests.support import (action_server, helper_process, result_of, round_trip, send,
-                           server_evidence)
+from tests.support import (action_server, helper_process, prove_feedback_path, result_of,
+                           round_trip, send, server_evidence)
 
 PERIOD = 0.01  # 100 Hz feedback per goal
 
@@ -48,12 +48,24 @@ def server():
 
 
 def run_clients(server, action, mode, clients, goals, order):
-    children = [helper_process('tests.helpers.fib_client', [action, mode, goals, order])
-                for _ in range(clients)]
+    """Client processes (tests/helpers/fib_client.py), one after another ready, then all sending
+    their goals; their reports. Each proved its feedback path before it was ready, so the server
+    published feedback before the goals: ``server_published_since_ready`` is what it published
+    after that client was ready, ``server_published_since_go`` what it published for the goals."""
+    children, published_at_ready = [], []
     try:
+        for _ in range(clients):
+            children.append(helper_process('tests.helpers.fib_client',
+                                           [action, mode, goals, order]))
+            published_at_ready.append(server_published(server))
+        published_at_go = server_published(server)
         for child in children:
             child.send('go')
-        return [json.loads(c.expect('RESULT', timeout=90).split(' ', 1)[1]) for c in children]
+        reports = [json.loads(c.expect('RESULT', timeout=90).split(' ', 1)[1]) for c in children]
+        published = server_published(server)
+        return [{**report, 'server_published_since_ready': published - ready,
+                 'server_published_since_go': published - published_at_go}
+                for report, ready in zip(reports, published_at_ready)]
     finally:
         for child in children:
             child.stop()
@@ -73,23 +85,24 @@ def test_three_clients_each_get_exactly_their_own_feedback(ros, mode, guarded):
     child = start_server(action, guarded=guarded)
     try:
         reports = run_clients(child, action, mode, clients, goals, order)
-        published = server_published(child)
         assert child.poll() is None, 'server died'
     finally:
         child.stop()
     own = goals * order
-    assert published == clients * own
     for report in reports:
+        assert report['server_published_since_go'] == clients * own
         assert report['results'] == goals
         assert report['complete_goals'] == goals, report
         assert report['own_received'] == own
         assert report['misrouted'] == 0
         if mode == 'off':
             assert not report['active'] and report['reason'] == 'feedback_filter is off'
-            assert report['taken'] == published
+            assert report['taken'] - report['proof_taken'] == \
+                report['server_published_since_ready'], report
         else:
             assert report['active'], report['reason']
-            assert report['taken'] == own, 'foreign feedback was taken from rcl'
+            assert report['taken'] - report['proof_taken'] == own, \
+                f'foreign feedback was taken from rcl: {report}'
             assert report['dropped'] == 0
 
 
@@ -117,7 +130,7 @@ def test_many_concurrent_goals_keep_the_filter_active(ros, mode, goals):
     # goals mode holds a request whose UUID came with a filter update until the server's writer
     # has the update, so the feedback the server publishes at once arrives too
     assert report['complete_goals'] == goals, json.dumps(report)
-    assert report['taken'] == report['own_received'] == goals * 6
+    assert report['taken'] - report['proof_taken'] == report['own_received'] == goals * 6
     assert report['arrival_timeouts'] == 0
     if mode == 'client':
         assert report['updates'] == report['held_goals'] == 0
@@ -129,9 +142,11 @@ def test_many_concurrent_goals_keep_the_filter_active(ros, mode, goals):
 # --- in-process clients against a server process --------------------------------------------------
 
 def make_client(ros, action, **kwargs):
+    """A client whose goal service and feedback path are proven (tests.support.prove_feedback_path):
+    its counters include that proof's goals, so a test counts from a snapshot."""
     client = ActionClient(ros.node, Fibonacci, action, **kwargs)
     assert client.wait_for_server(timeout_sec=20)
-    assert round_trip(ros, client), 'the server never answered a goal'
+    prove_feedback_path(ros.spin_until, client)
     return client
 
 
@@ -150,6 +165,7 @@ def test_feedback_published_before_the_result_but_taken_after_it_is_delivered(ro
     child = start_server(action, period=0.5)
     try:
         client = make_client(ros, action, feedback_filter=mode)
+        before = client.feedback_filter_state
         received = []  # (k, whether the result was in by then)
         result = Future()
         handle = send(ros, client, order, feedback_callback=lambda m: received.append(
@@ -169,7 +185,8 @@ def test_feedback_published_before_the_result_but_taken_after_it_is_delivered(ro
     assert [k for k, _ in received] == list(range(order))
     assert any(after for _, after in received), 'nothing was queued behind the result'
     state = client.feedback_filter_state
-    assert state.feedback_taken - state.feedback_dropped == order
+    assert (state.feedback_taken - state.feedback_dropped) - \
+        (before.feedback_taken - before.feedback_dropped) == order
 
 
 def test_default_mode_is_client_with_a_tag_and_a_fixed_filter(ros, server):
@@ -228,6 +245,7 @@ def test_a_goal_is_held_until_its_filter_update_has_reached_the_server(
     child = action_server(action, 0.1, env=slow_filter_updates)
     try:
         client = make_client(ros, action, feedback_filter=mode)
+        held = client.feedback_filter_state.held_goals
         received: dict[bytes, list[int]] = {}
         for _ in range(3):
             own = UUID(uuid=list(uuid.uuid4().bytes))
@@ -241,7 +259,7 @@ def test_a_goal_is_held_until_its_filter_update_has_reached_the_server(
         child.stop()
     assert list(received.values()) == [list(range(order))] * 3
     state = client.feedback_filter_state
-    assert state.updates >= 3 and state.held_goals == 3, state
+    assert state.updates >= 3 and state.held_goals - held == 3, state
     assert state.confirmed and state.arrival_timeouts == 0, state
 
 
@@ -252,6 +270,7 @@ def test_a_held_goal_waits_from_the_first_spin_not_from_the_call(ros, server, mo
     monkeypatch.setattr(cft_action.client, 'FILTER_ARRIVAL_TIMEOUT', 3.0)
     action, _ = server
     client = make_client(ros, action)
+    held = client.feedback_filter_state.held_goals
     received = []
     future = client.send_goal_async(Fibonacci.Goal(order=3), feedback_callback=received.append,
                                     goal_uuid=UUID(uuid=list(uuid.uuid4().bytes)))
@@ -261,7 +280,7 @@ def test_a_held_goal_waits_from_the_first_spin_not_from_the_call(ros, server, mo
     ros.spin_until(lambda: len(received) == 3, 5)
     assert [m.feedback.sequence[0] for m in received] == [0, 1, 2]
     state = client.feedback_filter_state
-    assert (state.held_goals, state.arrival_timeouts, state.confirmed) == (1, 0, True), state
+    assert (state.held_goals - held, state.arrival_timeouts, state.confirmed) == (1, 0, True), state
 
 
 def complete_feedback_of_one_goal(ros, client, order=3):
@@ -303,10 +322,11 @@ def test_wait_for_server_proves_that_the_server_has_the_reader(ros, server):
 def test_goal_without_feedback_callback_receives_no_feedback(ros, server):
     action, _ = server
     client = make_client(ros, action)
+    taken = client.feedback_filter_state.feedback_taken
     handle = send(ros, client, 5)
     assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
     ros.spin_for(0.3)
-    assert client.feedback_filter_state.feedback_taken == 0
+    assert client.feedback_filter_state.feedback_taken == taken
 
 
 @pytest.mark.parametrize('mode', ['client', 'goals'])
@@ -383,8 +403,10 @@ def test_multithreaded_executor_with_goals_sent_from_another_thread(server):
                               goal_service_qos_profile=deep, result_service_qos_profile=deep,
                               feedback_sub_qos_profile=deep)
         assert client.wait_for_server(timeout_sec=20)
-        # send_goal waits for ever on a goal response that was lost: prove the service first.
+        # send_goal waits for ever on a goal response that was lost: prove the service (and the
+        # feedback path, which the test counts) first.
         assert round_trip(ros, client, wait=wait_until), server_evidence(server_proc)
+        prove_feedback_path(wait_until, client)
         lock = threading.Lock()
         received: dict[int, list[int]] = {}
 
@@ -420,6 +442,7 @@ def test_fallback_through_an_unavailable_binding(ros, server, monkeypatch):
     client = make_client(ros, action)
     state = client.feedback_filter_state
     assert not state.active and 'forced by the test' in state.reason and state.expression == ''
+    dropped = state.feedback_dropped
     received = []
     handle = send(ros, client, 4, feedback_callback=received.append)
     # Without the binding, feedback is taken as by rclpy, and as there the feedback that arrives
@@ -427,7 +450,7 @@ def test_fallback_through_an_unavailable_binding(ros, server, monkeypatch):
     # feedback is awaited before the result is asked for.
     assert ros.spin_until(lambda: len(received) == 4, 20), received
     assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
-    assert client.feedback_filter_state.feedback_dropped == 0
+    assert client.feedback_filter_state.feedback_dropped == dropped
 
 
 def test_mode_from_environment_and_bad_values(ros, server, monkeypatch):

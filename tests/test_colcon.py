@@ -21,26 +21,11 @@ from pathlib import Path
 
 import pytest
 
+from tests.support import copy_package
 from tests.test_readme import check_tutorial_log, run_tutorial_client
 
 ROOT = Path(__file__).resolve().parent.parent
-# What the package's build reads: setup.py builds the extensions, pyproject.toml has the metadata
-# (and reads README.md), package.xml and resource/ make it an ament_python package.
-PACKAGE_FILES = ('setup.py', 'pyproject.toml', 'package.xml', 'README.md', 'resource')
 BUILD_TIMEOUT = 180  # measured: about 10 s on this 2-core machine
-
-
-def _copy_package(destination: Path) -> None:
-    destination.mkdir(parents=True)
-    for name in PACKAGE_FILES:
-        source = ROOT / name
-        if source.is_dir():
-            shutil.copytree(source, destination / name)
-        else:
-            shutil.copy2(source, destination / name)
-    # the sources only: not what an editable install built in place
-    shutil.copytree(ROOT / 'cft_action', destination / 'cft_action',
-                    ignore=shutil.ignore_patterns('*.so', '__pycache__'))
 
 
 def _clean_env() -> dict[str, str]:
@@ -75,7 +60,7 @@ def workspace(tmp_path_factory) -> Path:
     if shutil.which('colcon', path=str(Path(sys.executable).parent)) is None:
         pytest.fail('colcon is not installed in this venv: `make test` installs the test extra')
     workspace = tmp_path_factory.mktemp('colcon_ws')
-    _copy_package(workspace / 'src' / 'cft_action')
+    copy_package(workspace / 'src' / 'cft_action')
     start = time.monotonic()
     build = subprocess.run(
         [str(Path(sys.executable).parent / 'colcon'), 'build', '--event-handlers',

@@ -211,42 +211,46 @@ def test_writer_filtered_samples_are_counted_as_lost_up_to_2_14_5(ros, capfd):
 
 
 def check_lost_counts(ros, prefix, child, capfd, counted: bool):
-    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
     for expression in ('data > %0', None):
-        lost = []
-        received = []
-        callbacks = SubscriptionEventCallbacks(message_lost=lambda info: lost.append(info))
-        if expression:
-            subscription = create_filtered_subscription(
-                ros.node, Int32, f'{prefix}/ints', lambda m: received.append(m.data), qos,
-                expression, [900], event_callbacks=callbacks)
-            expected = list(range(901, 1000))
-        else:
-            subscription = ros.node.create_subscription(
-                Int32, f'{prefix}/ints', lambda m: received.append(m.data), qos,
-                event_callbacks=callbacks)
-            expected = list(range(1000))
-        assert child.request('wait ints 1', 'MATCHED') == 'MATCHED'
-        child.send('burst 1000 0.001')  # spin meanwhile: the reader keeps only 10 too
-        ros.spin_until(lambda: received[-1:] == [999] and (lost or not (expression and counted)),
-                       timeout=20)
-        child.expect('SENT', timeout=10)
-        ros.spin_for(0.5)
-        # Keep-last 10 on both sides: when the executor is not scheduled for 10 ms, either history
-        # may drop the oldest of a 1 kHz burst, filtered or not, as with plain rclpy. What is pinned
-        # is that the newest sample arrives (no stall) and that nothing arrives out of order.
-        assert received[-1] == 999
-        assert received == sorted(set(received)) and set(received) <= set(expected)
-        if expression and counted:
-            assert lost, 'Fast DDS no longer reports writer-filtered samples as lost'
-            assert 0 < lost[-1].total_count < 1000
-            assert 'false alarms' in capfd.readouterr().err
-        elif expression:  # 2.14.6 and later: a GAP for filtered samples is not a loss
-            assert lost == [], 'this Fast DDS reports writer-filtered samples as lost again'
-        else:  # overflow of a keep-last reader is not reported as lost
-            assert lost == []
-        ros.node.destroy_subscription(subscription)
-        assert child.request('wait ints 0', 'MATCHED') == 'MATCHED'
+        check_lost_count(ros, prefix, child, capfd, counted, expression)
+
+
+def check_lost_count(ros, prefix, child, capfd, counted: bool, expression: str | None):
+    qos = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+    lost = []
+    received = []
+    callbacks = SubscriptionEventCallbacks(message_lost=lambda info: lost.append(info))
+    if expression:
+        subscription = create_filtered_subscription(
+            ros.node, Int32, f'{prefix}/ints', lambda m: received.append(m.data), qos,
+            expression, [900], event_callbacks=callbacks)
+        expected = list(range(901, 1000))
+    else:
+        subscription = ros.node.create_subscription(
+            Int32, f'{prefix}/ints', lambda m: received.append(m.data), qos,
+            event_callbacks=callbacks)
+        expected = list(range(1000))
+    assert child.request('wait ints 1', 'MATCHED') == 'MATCHED'
+    child.send('burst 1000 0.001')  # spin meanwhile: the reader keeps only 10 too
+    ros.spin_until(lambda: received[-1:] == [999] and (lost or not (expression and counted)),
+                   timeout=20)
+    child.expect('SENT', timeout=10)
+    ros.spin_for(0.5)
+    # Keep-last 10 on both sides: when the executor is not scheduled for 10 ms, either history
+    # may drop the oldest of a 1 kHz burst, filtered or not, as with plain rclpy. What is pinned
+    # is that the newest sample arrives (no stall) and that nothing arrives out of order.
+    assert received[-1] == 999
+    assert received == sorted(set(received)) and set(received) <= set(expected)
+    if expression and counted:
+        assert lost, 'Fast DDS no longer reports writer-filtered samples as lost'
+        assert 0 < lost[-1].total_count < 1000
+        assert 'false alarms' in capfd.readouterr().err
+    elif expression:  # 2.14.6 and later: a GAP for filtered samples is not a loss
+        assert lost == [], 'this Fast DDS reports writer-filtered samples as lost again'
+    else:  # overflow of a keep-last reader is not reported as lost
+        assert lost == []
+    ros.node.destroy_subscription(subscription)
+    assert child.request('wait ints 0', 'MATCHED') == 'MATCHED'
 
 
 def test_regex_pattern_that_would_abort_fast_dds_is_refused(ros, publisher):

@@ -89,7 +89,7 @@ def test_expressions_that_would_not_fit_discovery_are_refused():
     plan = GoalFilterPlan('client')
     plan.initial()
     with pytest.raises(ExpressionTooLong, match=str(MAX_EXPRESSION_BYTES)):
-        for i in range(1000):
+        for _ in range(1000):
             plan.watch(uuid.uuid4().bytes)
             plan.grow()
 

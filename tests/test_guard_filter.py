@@ -313,7 +313,7 @@ def test_a_changed_filter_is_answered_with_the_new_filter(ros, publisher) -> Non
     arrived = False
     for probe in range(100, 200):
         child.send(f'pub {probe} {EXACT.hex()}')
-        if ros.spin_until(lambda: probe in reader.keys, timeout=0.2):
+        if ros.spin_until(lambda probe=probe: probe in reader.keys, timeout=0.2):
             arrived = True
             break
     assert arrived, f'the new filter never reached the writer: {reader.keys}'

@@ -16,8 +16,8 @@ from rclpy.serialization import serialize_message
 from cft_action import _native, ContentFilterError, guard
 from cft_action.parameter_events import ALL_NODES, NO_NODES, node_filter, ParameterEventHandler
 from harness.ros import unique_name
-from tests.support import helper_process
-from tests.test_parameter_events import BURST, burst, sync
+from tests.support import helper_process, prove_parameter_events
+from tests.test_parameter_events import BURST, burst
 
 EVERY, NONE, NOT_COMPILED, UNREADABLE = 1, 0, -1, -2
 
@@ -57,8 +57,9 @@ def big_endian(node: str) -> bytes:
 
 def random_node(rng: random.Random) -> str:
     def word():
+        rest = string.ascii_lowercase + string.digits + '_'
         return rng.choice(string.ascii_lowercase) + ''.join(
-            rng.choice(string.ascii_lowercase + string.digits + '_') for _ in range(rng.randint(0, 8)))
+            rng.choice(rest) for _ in range(rng.randint(0, 8)))
     return '/' + '/'.join(word() for _ in range(rng.randint(1, 3)))
 
 
@@ -118,11 +119,12 @@ def test_only_guarded_nodes_filter_on_their_side(ros, guarded):
         handler.add_parameter_callback('value', watched,
                                        lambda p: values.append(p.value.integer_value))
         assert child.request('matched 1', 'MATCHED') == 'MATCHED'
-        sync(ros, handler, child, [watched])
+        proof = prove_parameter_events(ros, handler, child, [watched])
         reader = handler._filter.reader
         judged = reader.reader_verdicts
-        assert burst(ros, handler, child, expected=BURST) == BURST  # the watched node's only
-        assert values == list(range(1, BURST + 1))
+        sent = burst(ros, handler, child, expected=BURST, proof=proof)
+        assert sent.received == BURST, sent.evidence  # the watched node's only
+        assert values == list(range(1, BURST + 1)), sent.evidence
         state = handler.parameter_event_filter_state
         if guarded:
             assert reader.reader_verdicts == judged, 'the writer sent events the filter rejects'

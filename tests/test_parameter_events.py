@@ -3,6 +3,7 @@
 import os
 import signal
 import time
+from typing import NamedTuple, Optional
 
 import pytest
 from rclpy.parameter_event_handler import ParameterEventHandler as RclpyParameterEventHandler
@@ -12,27 +13,32 @@ from cft_action import ContentFilterError, guard, is_filtered
 from cft_action.parameter_events import (ALL_NODES, NO_NODES, ParameterEventHandler,
                                          node_filter)
 from harness.ros import unique_name
-from tests.support import helper_process
+from tests.support import helper_process, prove_parameter_events
 
 BURST = 20
 SYNC_TIMEOUT = 15.0
 
 
 class Recorder:
-    """Parameter callbacks that record, per node, the values they were called with."""
+    """Parameter callbacks that record, per node, the values they were called with, and when."""
 
     def __init__(self, handler, parameter='value'):
         self.handler = handler
         self.parameter = parameter
         self.values = {}
+        self.arrivals = {}  # per node, time.monotonic() of each value
         self.handles = {}
 
     def watch(self, node_name):
         self.values.setdefault(node_name, [])
+        self.arrivals.setdefault(node_name, [])
         self.handles[node_name] = self.handler.add_parameter_callback(
-            self.parameter, node_name,
-            lambda p, n=node_name: self.values[n].append(p.value.integer_value))
+            self.parameter, node_name, lambda p, n=node_name: self.record(n, p))
         return self.handles[node_name]
+
+    def record(self, node_name, parameter):
+        self.values[node_name].append(parameter.value.integer_value)
+        self.arrivals[node_name].append(time.monotonic())
 
     def unwatch(self, node_name):
         self.handler.remove_parameter_callback(self.handles.pop(node_name))
@@ -66,30 +72,6 @@ def start_nodes():
         assert alive, f'param_nodes.py died\n{child.tail()}'
 
 
-def sync(ros, handler, child, names, timeout=SYNC_TIMEOUT):
-    """Return once an event of each of ``names`` got through the current filter.
-
-    A filter change reaches the publishers by discovery, and until then they apply the previous
-    one. Each name must already be watched; a ``sync`` parameter callback on it does not change
-    the filter, and its first call proves that the node's writer has the current filter.
-    """
-    seen = set()
-    handles = [handler.add_parameter_callback('sync', n, lambda p, n=n: seen.add(n))
-               for n in names]
-    updates = handler.parameter_event_filter_state.updates
-    try:
-        deadline = time.monotonic() + timeout
-        while seen != set(names) and time.monotonic() < deadline:
-            for name in set(names) - seen:
-                child.request(f'set {name} sync 1', 'SET')
-            ros.spin_until(lambda: seen == set(names), timeout=0.3)
-        assert seen == set(names), f'no event from {set(names) - seen} within {timeout} s'
-    finally:
-        for handle in handles:
-            handler.remove_parameter_callback(handle)
-    assert handler.parameter_event_filter_state.updates == updates, 'sync changed the filter'
-
-
 def in_force(ros, handler, names, timeout=SYNC_TIMEOUT):
     """Return once the publishers of ``names`` apply the handler's current filter.
 
@@ -105,14 +87,52 @@ def in_force(ros, handler, names, timeout=SYNC_TIMEOUT):
     assert handler.parameter_event_filter_state.confirmed
 
 
-def burst(ros, handler, child, count=BURST, expected=0, settle=1.0):
-    """Publish ``count`` changes of ``value`` on every node; return the events received."""
-    before = handler.parameter_event_filter_state.events_received
+class Burst(NamedTuple):
+    """What one burst delivered, and the evidence that a failure's message carries."""
+
+    received: int
+    evidence: str
+
+
+def burst(ros, handler, child, count=BURST, expected=0, settle=1.0, *, proof: str = '',
+          recorder: Optional[Recorder] = None) -> Burst:
+    """Publish ``count`` changes of ``value`` on every node; return the events received.
+
+    With the evidence of a miss that a rerun would not show (once, 18 of 20 events after the
+    proof of the event path, cause unknown): ``proof`` (what :func:`prove_parameter_events`
+    returned), the handler's filter state before and after, when the nodes answered and when the
+    events came, what each of ``recorder``'s callbacks got and when, and the /parameter_events
+    publishers that this node knows.
+    """
+    before = handler.parameter_event_filter_state
+    progress = []  # (seconds after the request, events received so far), at each change
+
+    def received_enough():
+        received = handler.parameter_event_filter_state.events_received - before.events_received
+        if not progress or progress[-1][1] != received:
+            progress.append((round(time.monotonic() - start, 3), received))
+        return received >= expected
+
+    start = time.monotonic()
     child.request(f'burst {count}', 'BURST', timeout=60)
-    ros.spin_until(
-        lambda: handler.parameter_event_filter_state.events_received - before >= expected, 15)
+    answered = time.monotonic() - start
+    ros.spin_until(received_enough, 15)
     ros.spin_for(settle)  # anything that should not arrive has had its chance
-    return handler.parameter_event_filter_state.events_received - before
+    received_enough()
+    after = handler.parameter_event_filter_state
+    received = after.events_received - before.events_received
+    timeline = progress if len(progress) <= 8 else [*progress[:4], '...', *progress[-4:]]
+    publishers = sorted(f"{i.node_namespace.rstrip('/')}/{i.node_name}"
+                        for i in ros.node.get_publishers_info_by_topic('/parameter_events'))
+    lines = [f'{received} events of {expected} expected, {count} changes per node; {proof}',
+             f'the nodes answered BURST after {answered:.3f} s; events over time (s, count): '
+             f'{timeline}',
+             f'filter before: {before}', f'filter after: {after}',
+             f'/parameter_events publishers known here: {publishers}']
+    for name, values in (recorder.values.items() if recorder else ()):
+        arrivals = [round(t - start, 3) for t in recorder.arrivals.get(name, [])]
+        lines.append(f'{name}: values {values}, at (s) {arrivals}')
+    return Burst(received, '\n'.join(lines))
 
 
 def test_is_a_drop_in(ros):
@@ -138,14 +158,15 @@ def test_callbacks_fire_for_watched_nodes_only_and_miss_nothing(ros, start_nodes
     for name in watched:
         recorder.watch(name)
     assert child.request('matched 1', 'MATCHED') == 'MATCHED'
-    sync(ros, handler, child, watched)
+    proof = prove_parameter_events(ros, handler, child, watched)
 
-    received = burst(ros, handler, child, expected=len(watched) * BURST)
+    sent = burst(ros, handler, child, expected=len(watched) * BURST, proof=proof,
+                 recorder=recorder)
 
     for name in watched:
-        assert recorder.values[name] == list(range(1, BURST + 1)), name
+        assert recorder.values[name] == list(range(1, BURST + 1)), f'{name}\n{sent.evidence}'
     # The unwatched nodes' events never reached this process: filtered by their writers.
-    assert received == len(watched) * BURST
+    assert sent.received == len(watched) * BURST, sent.evidence
     state = handler.parameter_event_filter_state
     assert state.watched_nodes == tuple(sorted(watched))
     assert state.updates == 2
@@ -174,20 +195,22 @@ def test_adding_and_removing_callbacks_grows_and_shrinks_the_filter(ros, start_n
     # A second callback on a watched node, for another parameter, changes nothing.
     extra = handler.add_parameter_callback('other', a, lambda p: None)
     assert handler.parameter_event_filter_state.updates == 2
-    sync(ros, handler, child, [a, b])
-    assert burst(ros, handler, child, expected=2 * BURST) == 2 * BURST
-    assert recorder.values[b] == list(range(1, BURST + 1))
+    proof = prove_parameter_events(ros, handler, child, [a, b])
+    sent = burst(ros, handler, child, expected=2 * BURST, proof=proof, recorder=recorder)
+    assert sent.received == 2 * BURST, sent.evidence
+    assert recorder.values[b] == list(range(1, BURST + 1)), sent.evidence
 
     # Shrink: b leaves the filter. Adding c right after proves, once c's events arrive, that the
     # writers (all in one participant) have the newer filter, which has no b either.
     recorder.unwatch(b)
     assert handler.get_parameter_event_filter() == in_class(a)
     recorder.watch(c)
-    sync(ros, handler, child, [a, c])
+    proof = prove_parameter_events(ros, handler, child, [a, c])
     recorder.values[b].clear()
-    assert burst(ros, handler, child, expected=2 * BURST) == 2 * BURST
-    assert recorder.values[b] == []
-    assert recorder.values[c] == list(range(1, BURST + 1))
+    sent = burst(ros, handler, child, expected=2 * BURST, proof=proof, recorder=recorder)
+    assert sent.received == 2 * BURST, sent.evidence
+    assert recorder.values[b] == [], sent.evidence
+    assert recorder.values[c] == list(range(1, BURST + 1)), sent.evidence
     assert handler.parameter_event_filter_state.updates == 4
 
     handler.remove_parameter_callback(extra)
@@ -214,9 +237,11 @@ def test_node_names_that_need_quoting(ros, start_nodes, prefix):
     assert relative.node_name == other
     assert handler.get_parameter_event_filter() == in_class(tricky, other)
     assert child.request('matched 1', 'MATCHED') == 'MATCHED'
-    sync(ros, handler, child, [tricky, other])
-    assert burst(ros, handler, child, expected=2 * BURST) == 2 * BURST
-    assert recorder.values[tricky] == recorder.values[other] == list(range(1, BURST + 1))
+    proof = prove_parameter_events(ros, handler, child, [tricky, other])
+    sent = burst(ros, handler, child, expected=2 * BURST, proof=proof, recorder=recorder)
+    assert sent.received == 2 * BURST, sent.evidence
+    assert recorder.values[tricky] == recorder.values[other] == list(range(1, BURST + 1)), \
+        sent.evidence
 
 
 def test_unquotable_node_name_is_left_out_of_the_filter(ros):
@@ -272,9 +297,10 @@ def test_user_expression_with_syntax_error_raises_naming_it(ros, start_nodes, pr
     assert handler.parameter_event_filter_state == before
     assert handler.get_parameter_event_filter() == ('node = %0', [f"'{a}'"])
     assert child.request('matched 1', 'MATCHED') == 'MATCHED'
-    sync(ros, handler, child, [a])
-    assert burst(ros, handler, child, expected=BURST) == BURST
-    assert recorder.values[a] == list(range(1, BURST + 1))
+    proof = prove_parameter_events(ros, handler, child, [a])
+    sent = burst(ros, handler, child, expected=BURST, proof=proof, recorder=recorder)
+    assert sent.received == BURST, sent.evidence
+    assert recorder.values[a] == list(range(1, BURST + 1)), sent.evidence
 
 
 def test_user_expression_and_event_callbacks(ros, start_nodes, prefix):
@@ -293,9 +319,10 @@ def test_user_expression_and_event_callbacks(ros, start_nodes, prefix):
     assert handler.get_parameter_event_filter() == (ALL_NODES, [])
     assert child.request('matched 1', 'MATCHED') == 'MATCHED'
     in_force(ros, handler, [a, b, c])
+    proof = prove_parameter_events(ros, handler, child, [a, b, c])
     events.clear()
-    burst(ros, handler, child, expected=3 * BURST)
-    assert sorted(set(events)) == [a, b, c] and len(events) == 3 * BURST
+    sent = burst(ros, handler, child, expected=3 * BURST, proof=proof, recorder=recorder)
+    assert sorted(set(events)) == [a, b, c] and len(events) == 3 * BURST, sent.evidence
 
     # A user expression, bare names quoted automatically; it wins over the event callback.
     handler.set_parameter_event_filter('node = %0 OR node = %1', [a, c])
@@ -307,9 +334,10 @@ def test_user_expression_and_event_callbacks(ros, start_nodes, prefix):
     recorder.watch(b)
     assert handler.parameter_event_filter_state.updates == state.updates
     in_force(ros, handler, [a, b, c])
+    proof = prove_parameter_events(ros, handler, child, [a, c])
     events.clear()
-    burst(ros, handler, child, expected=2 * BURST)
-    assert sorted(set(events)) == [a, c] and len(events) == 2 * BURST
+    sent = burst(ros, handler, child, expected=2 * BURST, proof=proof, recorder=recorder)
+    assert sorted(set(events)) == [a, c] and len(events) == 2 * BURST, sent.evidence
 
     # Clearing it hands the filter back to the handler: all nodes while the event callback lives.
     handler.set_parameter_event_filter('')
@@ -334,7 +362,7 @@ def test_a_change_is_unconfirmed_until_the_publishers_have_it(ros, start_nodes, 
     handler = ParameterEventHandler(ros.node)
     Recorder(handler).watch(a)
     assert child.request('matched 1', 'MATCHED') == 'MATCHED'
-    sync(ros, handler, child, [a])
+    prove_parameter_events(ros, handler, child, [a])
     in_force(ros, handler, [a, b])  # b's writer has 'node = %0' too: it drops b's events
     events = []
 
@@ -350,8 +378,10 @@ def test_a_change_is_unconfirmed_until_the_publishers_have_it(ros, start_nodes, 
         os.kill(child.pid, signal.SIGCONT)
 
     in_force(ros, handler, [a, b])
-    burst(ros, handler, child, expected=2 * BURST)
-    assert sorted(set(events)) == [a, b] and len(events) == 2 * BURST
+    proof = prove_parameter_events(ros, handler, child, [a, b])
+    events.clear()
+    sent = burst(ros, handler, child, expected=2 * BURST, proof=proof)
+    assert sorted(set(events)) == [a, b] and len(events) == 2 * BURST, sent.evidence
 
 
 def test_use_sim_time_still_flips_the_clock(ros, start_nodes, prefix):
@@ -370,10 +400,10 @@ def test_use_sim_time_still_flips_the_clock(ros, start_nodes, prefix):
     for value in (True, False):
         child.send(f'remote {me} use_sim_time {"true" if value else "false"}')
         # Spin: our parameter service must answer the other process.
-        assert ros.spin_until(lambda: clock.ros_time_is_active == value, timeout=20), \
+        assert ros.spin_until(lambda value=value: clock.ros_time_is_active == value, timeout=20), \
             f'use_sim_time={value} did not reach the clock'
         assert child.expect('REMOTE', timeout=20) == 'REMOTE OK'
-        assert ros.spin_until(lambda: len(seen) >= (1 if value else 2), timeout=5)
+        assert ros.spin_until(lambda value=value: len(seen) >= (1 if value else 2), timeout=5)
     assert seen == [True, False]
     # The handler that watches another node did not receive this node's events.
     assert watching_other.parameter_event_filter_state.events_received == 0

@@ -14,7 +14,8 @@ from test_msgs.action import Fibonacci
 
 from cft_action import ActionClient, guard
 from harness.ros import unique_name
-from tests.support import action_server, fastdds_header_probe, round_trip, server_evidence
+from tests.support import (action_server, fastdds_header_probe, prove_feedback_path, round_trip,
+                           server_evidence)
 
 READERS = 40
 ORDER = 5
@@ -41,6 +42,7 @@ def test_a_guarded_writer_filters_for_every_client_past_32(ros, limit, filtered_
     try:
         assert witness.wait_for_server(timeout_sec=30)
         assert round_trip(ros, witness, tries=15), server_evidence(server)
+        prove_feedback_path(ros.spin_until, clients[0])
         before = server.request_json('stats', 'STATS')
         received = []
         goal = clients[0].send_goal_async(Fibonacci.Goal(order=ORDER),

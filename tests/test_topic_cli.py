@@ -257,7 +257,8 @@ def test_echo_prints_only_matching_messages(publisher, clis):
         once: [{'data': 10}],
     }
     for cli, documents in expected.items():
-        assert cli.wait_lines(lambda out: out.count('---') >= len(documents), 15), cli.log()
+        assert cli.wait_lines(lambda out, documents=documents: out.count('---') >= len(documents),
+                             15), cli.log()
     assert once.wait(10) == 0, once.log()  # --once exits by itself
     time.sleep(1.0)  # anything that should not arrive has had its chance
     for cli, documents in expected.items():
@@ -293,7 +294,8 @@ def test_echo_content_filter_then_ros2cli_python_filter(publisher, clis):
         field: ['world'] * (BURST // 3),  # a field that is not a message: printed as it is
     }
     for cli, documents in expected.items():
-        assert cli.wait_lines(lambda out: out.count('---') >= len(documents), 15), cli.log()
+        assert cli.wait_lines(lambda out, documents=documents: out.count('---') >= len(documents),
+                             15), cli.log()
     assert csv.wait_lines(lambda out: len(out) >= BURST - 27, 15), csv.log()
     assert broken.wait(15) == 1, broken.log()  # ros2cli's traceback, as one line and status 1
     assert broken.stdout == []

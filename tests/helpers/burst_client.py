@@ -2,9 +2,10 @@
 
 Usage: ``python -m tests.helpers.burst_client ACTION MODE STALL_S``
 
-After ``wait_for_server`` and one goal whose feedback arrived (which proves that the server's
-feedback writer has matched this client's reader: a server that discovers the reader late loses
-a goal's first feedback for any client, plain rclpy's too), without spinning, it sends 6 goals
+After ``wait_for_server`` and one goal whose feedback arrived
+(:func:`tests.support.prove_feedback_path`, which proves that the server's feedback writer has
+matched this client's reader: a server that discovers the reader late loses a goal's first
+feedback for any client, plain rclpy's too), without spinning, it sends 6 goals
 with generated UUIDs and a feedback callback, 1 with a caller-supplied random ``goal_uuid`` and a
 feedback callback, and 1 without a feedback callback; then it spins until every answered goal
 has its result and prints ``RESULT <json>``: per goal with a callback, the feedback indices
@@ -30,6 +31,7 @@ from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient
+from tests.support import node_waiter, prove_feedback_path
 
 DEPTH = 40
 ORDER = 10
@@ -44,19 +46,6 @@ def slowed(stall_s):
     return find_caller_slowly
 
 
-def feedback_round_trip(node, client, tries: int = 5) -> bool:
-    """Send order-1 goals until one delivers its feedback."""
-    for _ in range(tries):
-        received: list = []
-        client.send_goal_async(Fibonacci.Goal(order=1), received.append)
-        deadline = time.monotonic() + 5
-        while time.monotonic() < deadline and not received:
-            rclpy.spin_once(node, timeout_sec=0.05)
-        if received:
-            return True
-    return False
-
-
 def main() -> None:
     action, mode, stall_s = sys.argv[1], sys.argv[2], float(sys.argv[3])
     rclpy.init()
@@ -66,8 +55,10 @@ def main() -> None:
     if not client.wait_for_server(timeout_sec=20):
         print('NO SERVER', flush=True)
         return
-    if not feedback_round_trip(node, client):
-        print('NO FEEDBACK', flush=True)
+    try:
+        prove_feedback_path(node_waiter(node), client)
+    except AssertionError as error:
+        print(f'NO FEEDBACK {error}', flush=True)
         return
     rcutils_logger._find_caller = slowed(stall_s)
     received: dict[str, list[int]] = {}

@@ -6,7 +6,8 @@ is), reliable, keep all.
 Commands on stdin, one per line:
   wait N          wait until exactly N subscriptions matched; replies MATCHED or TIMEOUT
   pub K UUIDHEX   publish feedback [K] for the goal UUID (32 hex digits); no reply
-  stats           replies STATS <json>: the guard's filter counters and layout report (guard.layout())
+  stats           replies STATS <json>: the guard's filter counters and layout report
+                  (guard.layout())
 """
 
 import json
@@ -33,7 +34,8 @@ def main() -> None:
     for line in sys.stdin:
         command, *arguments = line.split()
         if command == 'wait':
-            matched = wait_until(lambda: publisher.get_subscription_count() == int(arguments[0]))
+            wanted = int(arguments[0])
+            matched = wait_until(lambda wanted=wanted: publisher.get_subscription_count() == wanted)
             print('MATCHED' if matched else 'TIMEOUT', flush=True)
         elif command == 'pub':
             message = message_type()
@@ -41,7 +43,8 @@ def main() -> None:
             message.feedback.sequence = [int(arguments[0])]
             publisher.publish(message)
         elif command == 'stats':
-            print('STATS', json.dumps({**guard.filter_counts(), 'layout': guard.layout()}), flush=True)
+            stats = {**guard.filter_counts(), 'layout': guard.layout()}
+            print('STATS', json.dumps(stats), flush=True)
     node.destroy_node()
     rclpy.shutdown()
 

@@ -1,10 +1,12 @@
 """A client process for the ActionClient tests: sends goals on command and reports what arrived.
 
 Usage: ``python -m tests.helpers.fib_client ACTION MODE GOALS ORDER``
-MODE is a cft_action feedback_filter mode. Before ``READY`` the client completes one goal of order
-0 (no feedback): wait_for_server only sees the server in the graph, while this round trip proves
-that the endpoints matched; goals sent too early were lost here. Then the line ``go`` sends GOALS
-goals of ORDER feedback messages each, waits for their results, and prints ``RESULT <json>``.
+MODE is a cft_action feedback_filter mode, or ``rclpy``. Before ``READY`` the client proves its
+goal service and its feedback path (:func:`tests.support.prove_feedback_path`): wait_for_server
+only sees the server in the graph, and a server that matched the client's feedback reader late
+loses a goal's first feedback for any client. Then the line ``go`` sends GOALS goals of ORDER
+feedback messages each, waits for their results, and prints ``RESULT <json>``; its ``taken`` and
+``dropped`` count from the client's creation, ``proof_taken`` is what the proof took of them.
 """
 
 import json
@@ -19,6 +21,7 @@ from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient
+from tests.support import node_waiter, prove_feedback_path
 
 
 # rclpy's default depth of 10 drops goal responses and feedback in bursts, and any keep-last
@@ -27,21 +30,6 @@ DEEP = QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000,
                   reliability=ReliabilityPolicy.RELIABLE)
 DEEP_QOS = {'goal_service_qos_profile': DEEP, 'result_service_qos_profile': DEEP,
             'cancel_service_qos_profile': DEEP, 'feedback_sub_qos_profile': DEEP}
-
-
-def spin_until_done(node: Node, future, timeout: float) -> bool:
-    rclpy.spin_until_future_complete(node, future, timeout_sec=timeout)
-    return future.done()
-
-
-def round_trip(node: Node, client, tries: int = 10) -> bool:
-    """Complete one order-0 goal, resending while the endpoints match: a goal response written
-    before the server's response writer matched this client is lost for good (volatile)."""
-    for _ in range(tries):
-        probe = client.send_goal_async(Fibonacci.Goal(order=0))
-        if spin_until_done(node, probe, 2):
-            return spin_until_done(node, probe.result().get_result_async(), 20)
-    return False
 
 
 def main() -> None:
@@ -54,9 +42,15 @@ def main() -> None:
         client.new_goal_uuid = lambda: UUID(uuid=list(uuid.uuid4().bytes))
     else:
         client = ActionClient(node, Fibonacci, action, feedback_filter=mode, **DEEP_QOS)
-    if not (client.wait_for_server(timeout_sec=20) and round_trip(node, client)):
+    if not client.wait_for_server(timeout_sec=20):
         print('NO SERVER', flush=True)
         return
+    try:
+        prove_feedback_path(node_waiter(node), client)
+    except AssertionError as error:
+        print(f'NO FEEDBACK {error}', flush=True)
+        return
+    proof = getattr(client, 'feedback_filter_state', None)
     print('READY', flush=True)
     sys.stdin.readline()
 
@@ -102,6 +96,7 @@ def main() -> None:
         'incomplete': repr({i: ks for i, ks in enumerate(received.values())
                             if ks != list(range(order))})[:400],
         **({'taken': state.feedback_taken, 'dropped': state.feedback_dropped,
+            'proof_taken': proof.feedback_taken if proof else 0,
             'active': state.active, 'reason': state.reason, 'updates': state.updates,
             'held_goals': state.held_goals, 'arrival_timeouts': state.arrival_timeouts}
            if state else {}),

@@ -1,4 +1,4 @@
-"""Changes a subscription's filter in a loop while samples arrive; used by tests/test_reader_lock.py.
+"""Changes a subscription's filter in a loop while samples arrive (for tests/test_reader_lock.py).
 
 Usage: ``python -m tests.helpers.filter_churn TOPIC SECONDS``. Subscribes to ``TOPIC`` (Int32),
 filtered, prints ``READY`` once a sample arrived, then sets a new filter expression as fast as it

@@ -42,7 +42,8 @@ def main() -> None:
         if command == 'wait':
             topic, count = argument.split()
             publisher = publishers[topic][0]
-            matched = wait_until(lambda: publisher.get_subscription_count() == int(count))
+            matched = wait_until(lambda publisher=publisher, wanted=int(count):
+                                 publisher.get_subscription_count() == wanted)
             print('MATCHED' if matched else 'TIMEOUT', flush=True)
         elif command == 'burst':
             count, _, period = argument.partition(' ')
