@@ -1,7 +1,7 @@
 """A client node written the way real nodes are: coroutine timer callbacks, one reentrant callback
 group for the timer and the action client, a 4-thread ``MultiThreadedExecutor``.
 
-Usage: ``python -m tests.helpers.coroutine_client ACTION MODE GOALS IN_FLIGHT DEADLINE_S``
+Usage: ``python -m tests.helpers.coroutine_client ACTION MODE GOALS IN_FLIGHT DEADLINE_S [DEPTH]``
 
 ``MODE`` is a ``feedback_filter`` mode of cft_action, or ``rclpy`` for plain rclpy's client. The
 timer's callback is a coroutine that, while fewer than ``IN_FLIGHT`` goals run and fewer than
@@ -10,6 +10,11 @@ timer's callback is a coroutine that, while fewer than ``IN_FLIGHT`` goals run a
 prints ``RESULT <json>``: goals sent, results, the feedback received per goal against what the
 server published (the result's ``sequence[0]``), and feedback of other goals. An exception that
 ends the spin is printed as ``SPIN_ERROR <repr>``, and the process exits with status 3.
+
+``DEPTH`` makes the goal and result services' queues keep-last ``DEPTH`` (default: rclpy's 10).
+Every client's response reader receives the responses to all clients, so at rclpy's depth a client
+that lags behind the others loses its own responses, and their goals never complete, plain rclpy's
+as much as cft_action's (README, "Differences from rclpy", the row on goal service queues).
 """
 
 import json
@@ -17,12 +22,14 @@ import sys
 import time
 import traceback
 import uuid
+from typing import Optional
 
 import rclpy
 from rclpy.action import ActionClient as RclpyActionClient
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 from rclpy.node import Node
+from rclpy.qos import QoSProfile
 from test_msgs.action import Fibonacci
 
 from cft_action import ActionClient
@@ -30,21 +37,24 @@ from cft_action import ActionClient
 
 class CoroutineClient(Node):
 
-    def __init__(self, action: str, mode: str, goals: int, in_flight: int) -> None:
+    def __init__(self, action: str, mode: str, goals: int, in_flight: int,
+                 depth: Optional[int]) -> None:
         super().__init__(f'cft_coroutine_client_{uuid.uuid4().hex[:8]}')
         group = ReentrantCallbackGroup()
+        queues = {} if depth is None else {f'{service}_service_qos_profile': QoSProfile(depth=depth)
+                                           for service in ('goal', 'result')}
         if mode == 'rclpy':
-            self.client = RclpyActionClient(self, Fibonacci, action, callback_group=group)
+            self.client = RclpyActionClient(self, Fibonacci, action, callback_group=group, **queues)
         else:
             self.client = ActionClient(self, Fibonacci, action, callback_group=group,
-                                       feedback_filter=mode)
+                                       feedback_filter=mode, **queues)
         self.goals, self.in_flight_max = goals, in_flight
         self.sent = self.running = 0
         self.feedback: dict[int, int] = {}  # goal index -> feedback messages received
         self.foreign = 0
         self.published: dict[int, int] = {}  # goal index -> feedback the server published
         self.stage: dict[int, str] = {}  # goal index -> what it awaits: 'response' or 'result'
-        self.handles: dict[int, object] = {}  # goal index -> goal handle, while it awaits its result
+        self.handles: dict[int, object] = {}  # goal index -> its handle, while it awaits the result
         self.timer = self.create_timer(0.02, self.tick, callback_group=group)
 
     async def tick(self) -> None:
@@ -81,8 +91,9 @@ class CoroutineClient(Node):
 def main() -> None:
     action, mode = sys.argv[1], sys.argv[2]
     goals, in_flight, deadline_s = int(sys.argv[3]), int(sys.argv[4]), float(sys.argv[5])
+    depth = int(sys.argv[6]) if len(sys.argv) > 6 else None
     rclpy.init()
-    node = CoroutineClient(action, mode, goals, in_flight)
+    node = CoroutineClient(action, mode, goals, in_flight, depth)
     if not node.client.wait_for_server(timeout_sec=20):
         print('NO SERVER', flush=True)
         return
