@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import importlib.metadata
 import sys
+import threading
 from typing import Any, Callable, Optional
 
 import rclpy.qos_overriding_options
@@ -40,6 +41,8 @@ TESTED_RCLPY = (7, 1)
 
 #: Members of rclpy classes that this module uses: (owner, name).
 _REQUIRED: tuple[tuple[Any, str], ...] = (
+    (_RclpyActionClient, '_cancel_goal_async'),
+    (_RclpyActionClient, '_get_result_async'),
     (_RclpyActionClient, '_remove_pending_request'),
     (_RclpyActionClient, '_remove_pending_result_request'),
     (Node, '_validate_qos_or_depth_parameter'),
@@ -138,9 +141,20 @@ class CompatActionClient(_RclpyActionClient):
     rclpy's constructor creates the rcl action client and then hands the client to
     ``Node.add_waitable``, where an executor can first see it; :meth:`_cft_before_first_wait`
     runs in between.
+
+    rclpy sends a request (goal, result, cancel) and only then registers its sequence number, so
+    under a multithreaded executor another thread can take and execute the response in between:
+    rclpy then logs "Ignoring unexpected goal response" and the request's future never completes
+    (measured with plain rclpy: 3 client processes of coroutines on 4-thread executors). Here a
+    request holds ``request_lock`` from its send to its registration, and responses are taken
+    under it (:meth:`_cft_take_data`).
+
+    :param request_lock: The lock for that; a re-entrant one of its own if None.
     """
 
-    def __init__(self, node: Node, *args: Any, **kwargs: Any) -> None:
+    def __init__(self, node: Node, *args: Any, request_lock: Optional[Any] = None,
+                 **kwargs: Any) -> None:
+        self._cft_request_lock = request_lock or threading.RLock()
         shadowed = node.__dict__.get('add_waitable')
         add_waitable = node.add_waitable
 
@@ -165,6 +179,30 @@ class CompatActionClient(_RclpyActionClient):
 
     def _cft_before_first_wait(self) -> None:
         """Runs once the rcl entities exist, before any executor can see them."""
+
+    # --- requests registered before their responses can be taken ---------------------------------
+
+    def send_goal_async(self, goal: Any, feedback_callback: Optional[Callable] = None,
+                        goal_uuid: Optional[Any] = None) -> Future:
+        with self._cft_request_lock:
+            return super().send_goal_async(goal, feedback_callback, goal_uuid)
+
+    def _get_result_async(self, goal_handle: Any) -> Future:
+        with self._cft_request_lock:
+            return super()._get_result_async(goal_handle)
+
+    def _cancel_goal_async(self, goal_handle: Any) -> Future:
+        with self._cft_request_lock:
+            return super()._cancel_goal_async(goal_handle)
+
+    def take_data(self) -> dict:
+        """Take stuff from lower level so the wait set doesn't immediately wake again."""
+        with self._cft_request_lock:
+            return self._cft_take_data()
+
+    def _cft_take_data(self) -> dict:
+        """rclpy's take_data; called with the request lock held."""
+        return super().take_data()
 
     # Read before rclpy's constructor has run (from Node.add_waitable), so no check above yet.
     @property

@@ -195,7 +195,8 @@ class ActionClient(CompatActionClient):
         self._cancel_qos = kwargs.get('cancel_service_qos_profile', qos_profile_services_default)
         self._feedback_taken = 0
         self._feedback_dropped = 0
-        super().__init__(node, action_type, action_name, **kwargs)  # _cft_before_first_wait
+        super().__init__(node, action_type, action_name, request_lock=self._reader.lock,
+                         **kwargs)  # _cft_before_first_wait
         if not self._filter.installed:
             self._reader.fall_back('rclpy did not add the client through Node.add_waitable')
             self._assemble()
@@ -382,17 +383,14 @@ class ActionClient(CompatActionClient):
             self._finished_goals.drained()
         return ready
 
-    def take_data(self) -> dict:
-        """Take stuff from lower level so the wait set doesn't immediately wake again.
-
-        As rclpy's, except that the result response and the feedback are taken with their source
-        timestamps, and feedback that the server published after its goal's result is dropped.
-        """
+    def _cft_take_data(self) -> dict:
+        """As rclpy's take_data, except that the result response and the feedback are taken with
+        their source timestamps, and feedback published after its goal's result is dropped."""
         result_ready, feedback_ready = self._cft_take_readiness()
         entities = self._entities if self._entities.takes_here else None
         if entities is not None:
             self._cft_clear_readiness()  # rclpy's takes drop the sample info: taken below, with it
-        data = super().take_data()
+        data = super()._cft_take_data()
         if 'result' in data:
             self._note_result(data['result'][0], 0)
         elif result_ready and entities is not None:
