@@ -43,6 +43,16 @@ void *cft_filter_factory_for(const char *class_name, const struct cft_filter_cla
 // This library's own copy of `class_name` if it names one of these classes, else NULL.
 const char *cft_filter_class_name(const char *class_name);
 
+// The grammar of `class_name` if it names one of these classes, else NULL: for verdicts that the
+// guard gives without a filter instance (_guard_filter.c, "readers the guard keeps itself").
+struct cft_filter_grammar;
+const struct cft_filter_grammar *cft_filter_class_grammar(const char *class_name);
+// `expression` compiled in `grammar`: one malloc'd block (free() it), or NULL outside the grammar.
+void *cft_filter_grammar_compile(const struct cft_filter_grammar *grammar, const char *expression);
+// The program's verdict on a SerializedPayload_t, exactly as a filter of the class gives it.
+bool cft_filter_grammar_matches(const struct cft_filter_grammar *grammar, const void *program,
+                                const void *payload);
+
 // How many verdicts `filter` has given since it was created.
 unsigned long cft_filter_verdicts(const void *filter);
 

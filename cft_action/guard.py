@@ -129,7 +129,8 @@ def call_counts() -> dict[str, int]:
 
 #: The counters of cft_guard_filter_count() in _guard_filter.c, in its order.
 FILTER_COUNTERS = ('uuid_verdicts', 'fastdds_verdicts', 'compiled', 'not_compiled', 'dropped',
-                   'evicted', 'foreign_instance', 'verified', 'mismatches')
+                   'evicted', 'foreign_instance', 'verified', 'mismatches', 'kept', 'left',
+                   'relevance_verdicts')
 
 
 def filter_counts() -> dict[str, int]:
@@ -146,7 +147,13 @@ def filter_counts() -> dict[str, int]:
       reader went away or changed unseen, because the table was full, or because a verdict came for
       another filter instance;
     - ``verified`` / ``mismatches``: with ``CFT_GUARD_VERIFY=1``, verdicts also asked of Fast DDS,
-      and how many of them disagreed (0, or the guard is wrong).
+      and how many of them disagreed (0, or the guard is wrong);
+    - ``kept``: readers of the library's filter classes that the guard keeps itself, out of Fast
+      DDS's filter collection, so that no filter signature is written for them (each reader once
+      per writer and filter change); ``left``: such readers left to Fast DDS (the writer's virtual
+      call would not reach the guard, or the guard's table was full); ``relevance_verdicts``: the
+      verdicts given for kept readers when the writer asked whether a sample is relevant to them.
+      ``CFT_GUARD_KEEP_READERS=0`` leaves every reader to Fast DDS.
 
     An empty dict when the guard is not preloaded.
     """

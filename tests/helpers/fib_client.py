@@ -1,10 +1,12 @@
 """A client process for the ActionClient tests: sends goals on command and reports what arrived.
 
-Usage: ``python -m tests.helpers.fib_client ACTION MODE GOALS ORDER``
-MODE is a cft_action feedback_filter mode. Before ``READY`` the client completes one goal of order
-0 (no feedback): wait_for_server only sees the server in the graph, while this round trip proves
-that the endpoints matched; goals sent too early were lost here. Then the line ``go`` sends GOALS
-goals of ORDER feedback messages each, waits for their results, and prints ``RESULT <json>``.
+Usage: ``python -m tests.helpers.fib_client ACTION MODE GOALS ORDER [WRITER_FILTERING]``
+MODE is a cft_action feedback_filter mode, or ``rclpy`` for rclpy's own client; WRITER_FILTERING
+is the client's ``writer_filtering`` (default ``guarded``). Before ``READY`` the client completes
+one goal of order 0 (no feedback): wait_for_server only sees the server in the graph, while this
+round trip proves that the endpoints matched; goals sent too early were lost here. Then the line
+``go`` sends GOALS goals of ORDER feedback messages each, waits for their results, and prints
+``RESULT <json>``.
 """
 
 import json
@@ -46,6 +48,7 @@ def round_trip(node: Node, client, tries: int = 10) -> bool:
 
 def main() -> None:
     action, mode, goals, order = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+    writer_filtering = sys.argv[5] if len(sys.argv) > 5 else 'guarded'
     rclpy.init()
     node = Node(f'cft_test_client_{uuid.uuid4().hex[:8]}')
     if mode == 'rclpy':
@@ -53,7 +56,8 @@ def main() -> None:
         client = RclpyActionClient(node, Fibonacci, action, **DEEP_QOS)
         client.new_goal_uuid = lambda: UUID(uuid=list(uuid.uuid4().bytes))
     else:
-        client = ActionClient(node, Fibonacci, action, feedback_filter=mode, **DEEP_QOS)
+        client = ActionClient(node, Fibonacci, action, feedback_filter=mode,
+                              writer_filtering=writer_filtering, **DEEP_QOS)
     if not (client.wait_for_server(timeout_sec=20) and round_trip(node, client)):
         print('NO SERVER', flush=True)
         return
@@ -103,7 +107,8 @@ def main() -> None:
                             if ks != list(range(order))})[:400],
         **({'taken': state.feedback_taken, 'dropped': state.feedback_dropped,
             'active': state.active, 'reason': state.reason, 'updates': state.updates,
-            'held_goals': state.held_goals, 'arrival_timeouts': state.arrival_timeouts}
+            'held_goals': state.held_goals, 'arrival_timeouts': state.arrival_timeouts,
+            'filtered_in': state.filtered_in, 'reader_verdicts': client._reader.reader_verdicts}
            if state else {}),
     }), flush=True)
     sys.stdin.readline()
