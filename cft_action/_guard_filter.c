@@ -67,7 +67,8 @@ CFT_EXPORT long cft_guard_filter_layout(int which) {
   static const long layout[] = {RPD_TYPE_NAME, RPD_CONTENT_FILTER, CFP_RELATED_TOPIC,
                                 CFP_CLASS_NAME, CFP_EXPRESSION, CFP_PARAMETERS, RLV_VECTOR,
                                 STRING255_SIZE, STRING255_LENGTH, PAYLOAD_LENGTH, PAYLOAD_DATA,
-                                RPD_GUID, RPD_KEY, RPD_TOPIC_NAME};
+                                RPD_GUID, RPD_KEY, RPD_TOPIC_NAME, CC_KIND, CC_KIND_SIZE,
+                                CC_PAYLOAD, PAYLOAD_MAX_SIZE};
   return which >= 0 && which < (int)(sizeof layout / sizeof layout[0]) ? layout[which] : -1;
 #else
   (void)which;
