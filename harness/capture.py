@@ -206,6 +206,34 @@ def capture(interface: str, feedback: set[bytes], status: set[bytes],
     return counts
 
 
+def data_by_port(interface: str, writers: set[bytes], stop: threading.Event,
+                 listening: threading.Event) -> dict[int, dict[int, Optional[int]]]:
+    """The DATA submessages of ``writers`` received on ``interface`` until ``stop`` is set, by UDP
+    destination port (one port per reader's participant): sequence number -> the number of filter
+    signatures it carried (None: no ``PID_CONTENT_FILTER_INFO``; a repair counts once, the last
+    copy). Sets ``listening`` once the socket is bound. Unfragmented IPv4 datagrams only."""
+    sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(3))  # ETH_P_ALL
+    sock.bind((interface, 0))
+    sock.settimeout(0.2)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 * 1024 * 1024)
+    found: dict[int, dict[int, Optional[int]]] = {}
+    listening.set()
+    while not stop.is_set():
+        try:
+            frame, address = sock.recvfrom(65535)
+        except socket.timeout:
+            continue
+        if address[2] == socket.PACKET_OUTGOING or frame[12:14] != b'\x08\x00' or frame[23] != 17:
+            continue
+        header = (frame[14] & 0x0f) * 4
+        port = struct.unpack('!H', frame[14 + header + 2:14 + header + 4])[0]
+        for writer, sequence, signatures in filter_signatures(frame[14 + header + 8:]):
+            if writer in writers:
+                found.setdefault(port, {})[sequence] = signatures
+    sock.close()
+    return found
+
+
 def main() -> None:
     """Capture until ``stop`` on stdin, then print the counts."""
     interface = sys.argv[1]
