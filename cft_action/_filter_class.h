@@ -25,6 +25,12 @@
 #define CFT_UUID_CLASS "CFT_ACTION_UUID"
 #define CFT_NODE_CLASS "CFT_ACTION_NODE"
 
+// What a writer that filters for these classes (a writer of a guarded process) adds to its
+// USER_DATA, after rmw's "typehash=...;" (a key=value; pair, which rmw's parser skips): the
+// discovery data tells a reader's process which writers filter for it, since their samples carry
+// no filter signature for these classes (_writer_marks.c reads it).
+#define CFT_WRITER_MARK "cft_action=filters;"
+
 // What the library that links this file decides about the filters of its process: whether a
 // factory may create a filter now (the guard creates them for its writers and readers; a client's
 // process only for its own readers, since a writer there would filter unguarded), and what it

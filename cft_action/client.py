@@ -244,7 +244,8 @@ class ActionClient(CompatActionClient):
                 feedback_taken=self._feedback_taken, feedback_dropped=self._feedback_dropped,
                 confirmed=plan is None or self._arrival.is_confirmed(self._held_goals.needed()),
                 held_goals=self._held_goals.count, arrival_timeouts=self._arrival.timeouts,
-                filtered_in=self._filter.filtered_in(self._feedback_taken))
+                filtered_in=self._filter.filtered_in(self._feedback_taken,
+                                                     self._feedback_writers.gids))
 
     def new_goal_uuid(self) -> UUID:
         """
@@ -398,7 +399,7 @@ class ActionClient(CompatActionClient):
         feedback = data.get('feedback')
         if feedback is not None:
             self._feedback_taken += 1
-            self._filter.log_if_unguarded(self._feedback_taken)
+            self._filter.log_if_unguarded(self._feedback_taken, self._feedback_writers.gids)
             if self._finished_goals.dropped(bytes(feedback.goal_id.uuid), stamp):
                 self._feedback_dropped += 1
                 del data['feedback']

@@ -193,7 +193,7 @@ def filter_class_counts() -> dict[str, int]:
 
 
 #: The counters of cft_guard_writer_qos_count() in _guard_writer_qos.c, in its order.
-WRITER_QOS_COUNTERS = ('raised', 'left', 'reader_filters')
+WRITER_QOS_COUNTERS = ('raised', 'left', 'reader_filters', 'marked')
 
 
 def writer_limits() -> dict[str, int]:
@@ -207,7 +207,10 @@ def writer_limits() -> dict[str, int]:
     - ``raised``: writers created with the raised limit;
     - ``left``: writers left at 32, because the guard does not know this Fast DDS or its QoS did not
       hold the expected default (the guard says why on stderr, once);
-    - ``reader_filters``: the limit that raised writers get (32: not raised).
+    - ``reader_filters``: the limit that raised writers get (32: not raised);
+    - ``marked``: writers whose discovery data says that they filter for the library's filter
+      classes (``cft_action=filters;`` in their USER_DATA), which is how a client tells where its
+      feedback is filtered (``filtered_in``) now that their samples carry no filter signature.
 
     An empty dict when the guard is not preloaded.
     """

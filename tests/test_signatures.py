@@ -22,10 +22,11 @@ import threading
 
 import pytest
 
-from cft_action import guard
+from cft_action import _rcl, guard
 from harness.capture import data_by_port
 from harness.ros import unique_name
 from tests.support import action_server, helper_process
+from tests.test_action_client import start_server
 
 GOALS, ORDER = 2, 20
 UDP_ONLY = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
@@ -82,8 +83,10 @@ def test_no_signature_for_the_library_classes(mode: str) -> None:
     carried = {p: sum(s is not None for s in samples.values()) for p, samples in captured.items()}
     assert set(carried.values()) == {0}, carried
     for report in reports[:2]:
-        # The reader judged the samples that reached it: its own goals' only.
+        # The reader judged the samples that reached it: its own goals' only. It knows where the
+        # others were dropped from the writer's discovery data, not from a signature.
         assert report['reader_verdicts'] == report['taken'] == GOALS * ORDER, report
+        assert report['filtered_in'] == 'writer', report
 
 
 def test_a_dds_sql_filter_keeps_its_signature() -> None:
@@ -106,3 +109,25 @@ def test_fastdds_signatures_when_the_guard_leaves_the_readers_to_it() -> None:
     assert_own_feedback_only(reports, captured, filtered=2)
     signatures = {s for samples in captured.values() for s in samples.values()}
     assert signatures == {2}, signatures
+
+
+def test_only_a_guarded_writer_says_it_filters_in_its_discovery_data(ros) -> None:
+    """The mark in USER_DATA (cft_action/_guard_writer_qos.c), as this process reads it
+    (cft_action/_writer_marks.c): on a guarded server's feedback writer, not on a plain one's. The
+    GID that rclpy reports is the 16 bytes the mark is recorded under."""
+    servers = {}
+    for guarded in (True, False):
+        action = '/' + unique_name('cft_mark')
+        servers[guarded] = (action, start_server(action, guarded=guarded))
+    try:
+        for guarded, (action, child) in servers.items():
+            topic = f'{action}/_action/feedback'
+            assert ros.spin_until(lambda t=topic: ros.node.get_publishers_info_by_topic(t), 20)
+            [writer] = ros.node.get_publishers_info_by_topic(topic)
+            assert len(writer.endpoint_gid) == 16
+            assert _rcl.writer_filters(bytes(writer.endpoint_gid)) is guarded, action
+            marked = child.request_json('stats', 'STATS').get('guard_writers', {})
+            assert (marked.get('marked', 0) > 0) is guarded, marked
+    finally:
+        for _, child in servers.values():
+            child.stop()
