@@ -572,8 +572,8 @@ int cft_filter_relevance(const void *writer, const void *change, const void *rea
   memcpy(&length, c + CC_PAYLOAD + PAYLOAD_LENGTH, sizeof length);
   memcpy(&data, c + CC_PAYLOAD + PAYLOAD_DATA, sizeof data);
   memcpy(&max_size, c + CC_PAYLOAD + PAYLOAD_MAX_SIZE, sizeof max_size);
-  // ChangeKind_t has 5 values, ALIVE first; a payload fits its buffer.
-  if (kind > 4 || length > max_size || (length > 0 && data == NULL)) {
+  // ChangeKind_t has 4 values, ALIVE first; a payload fits its buffer.
+  if (kind > 3 || length > max_size || (length > 0 && data == NULL)) {
     layout_suspect("a change whose kind or payload is not where the headers have them");
     return -1;
   }
