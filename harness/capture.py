@@ -36,7 +36,7 @@ import struct
 import sys
 import threading
 from collections import Counter
-from typing import Any, Optional
+from typing import Any, Iterator, Optional
 
 CATEGORIES = ('feedback data', 'feedback gap/heartbeat', 'status', 'discovery', 'other')
 
@@ -67,30 +67,37 @@ def _writer_ids(payload: bytes) -> list[tuple[int, bytes, bool]]:
     return found
 
 
-def data_sequence_numbers(payload: bytes) -> list[tuple[bytes, int]]:
-    """(writer GUID, sequence number) of each DATA submessage of one RTPS datagram."""
+_PID_SENTINEL, _PID_CONTENT_FILTER_INFO = 0x0001, 0x0055
+
+
+def _samples(payload: bytes) -> Iterator[tuple[int, int, str, bytes, bytes, int]]:
+    """(submessage id, flags, byte order, body, writer GUID, sequence number) of each DATA and
+    DATA_FRAG submessage of one RTPS datagram (the body after the submessage's 4-byte header)."""
     if payload[:4] != b'RTPS':
-        return []
-    prefix, found, offset = payload[8:20], [], 20
+        return
+    prefix, offset = payload[8:20], 20
     while offset + 4 <= len(payload):
         kind, flags = payload[offset], payload[offset + 1]
         order = '<' if flags & 1 else '>'
         length = struct.unpack(order + 'H', payload[offset + 2:offset + 4])[0]
-        if kind == _DATA and offset + 24 <= len(payload):
-            high, low = struct.unpack(order + 'iI', payload[offset + 16:offset + 24])
-            found.append((prefix + payload[offset + 12:offset + 16], (high << 32) | low))
+        body = payload[offset + 4:offset + 4 + length] if length else payload[offset + 4:]
+        if kind in (_DATA, _DATA_FRAG) and len(body) >= 20:
+            high, low = struct.unpack(order + 'iI', body[12:20])
+            yield kind, flags, order, body, prefix + body[8:12], (high << 32) | low
         if length == 0:
             break
         offset += 4 + length
-    return found
 
 
-_PID_SENTINEL, _PID_CONTENT_FILTER_INFO = 0x0001, 0x0055
+def data_sequence_numbers(payload: bytes) -> list[tuple[bytes, int]]:
+    """(writer GUID, sequence number) of each DATA submessage of one RTPS datagram."""
+    return [(writer, sequence) for kind, _, _, _, writer, sequence in _samples(payload)
+            if kind == _DATA]
 
 
 def _signatures(body: bytes, order: str) -> Optional[int]:
-    """The number of filter signatures in the inline QoS of one DATA or DATA_FRAG submessage body
-    (after its 4-byte header), or None when it has no ``PID_CONTENT_FILTER_INFO``."""
+    """The number of filter signatures in the inline QoS of one DATA or DATA_FRAG submessage body,
+    or None when it has no ``PID_CONTENT_FILTER_INFO``."""
     at = 4 + struct.unpack(order + 'H', body[2:4])[0]  # octetsToInlineQos counts from there
     while at + 4 <= len(body):
         pid, length = struct.unpack(order + 'HH', body[at:at + 4])
@@ -109,22 +116,8 @@ def filter_signatures(payload: bytes) -> list[tuple[bytes, int, Optional[int]]]:
     """(writer GUID, sequence number, signatures) of each DATA and DATA_FRAG submessage of one RTPS
     datagram: how many readers' filter signatures (``PID_CONTENT_FILTER_INFO``) its inline QoS
     carries, None without that parameter."""
-    if payload[:4] != b'RTPS':
-        return []
-    prefix, found, offset = payload[8:20], [], 20
-    while offset + 4 <= len(payload):
-        kind, flags = payload[offset], payload[offset + 1]
-        order = '<' if flags & 1 else '>'
-        length = struct.unpack(order + 'H', payload[offset + 2:offset + 4])[0]
-        body = payload[offset + 4:offset + 4 + length] if length else payload[offset + 4:]
-        if kind in (_DATA, _DATA_FRAG) and len(body) >= 20:
-            high, low = struct.unpack(order + 'iI', body[12:20])
-            signatures = _signatures(body, order) if flags & 0x02 else None  # Q: inline QoS
-            found.append((prefix + body[8:12], (high << 32) | low, signatures))
-        if length == 0:
-            break
-        offset += 4 + length
-    return found
+    return [(writer, sequence, _signatures(body, order) if flags & 0x02 else None)  # Q: inline QoS
+            for _, flags, order, body, writer, sequence in _samples(payload)]
 
 
 def classify(payload: bytes, feedback: set[bytes], status: set[bytes]) -> tuple[str, int]:
