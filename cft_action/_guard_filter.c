@@ -314,7 +314,7 @@ static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool
 // Open addressing with a bounded probe. A missing entry is always safe (Fast DDS decides), so a
 // full neighbourhood evicts. Verdicts hold table_lock while they use a program, so an eviction by
 // another writer never frees a program in use.
-#define TABLE_SLOTS 4096
+#define TABLE_SLOTS 16384
 #define PROBE 16
 struct entry {
   const void *writer;      // NULL: free
@@ -327,14 +327,22 @@ static unsigned long kept_entries;  // entries with `kept`, for is_relevant's lo
 static struct entry table[TABLE_SLOTS];
 static pthread_mutex_t table_lock = PTHREAD_MUTEX_INITIALIZER;
 
+// splitmix64's finalizer: every input bit reaches every output bit. The readers of one writer
+// differ only in a byte or two of their entity id (the last 4 of 16 GUID bytes), which a plain
+// multiply-and-shift left out of the slot's low bits: 40 readers of one writer shared 2 windows.
+static uint64_t mix(uint64_t x) {
+  x ^= x >> 30;
+  x *= 0xBF58476D1CE4E5B9ull;
+  x ^= x >> 27;
+  x *= 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
 static unsigned slot_of(const void *writer, const uint8_t *reader) {
-  uint64_t h = (uint64_t)(uintptr_t)writer * 0x9E3779B97F4A7C15ull;
   uint64_t r0, r1;
   memcpy(&r0, reader, 8);
   memcpy(&r1, reader + 8, 8);
-  h ^= (r0 * 0xC2B2AE3D27D4EB4Full) ^ (r1 * 0x165667B19E3779F9ull);
-  h ^= h >> 29;
-  return (unsigned)(h % TABLE_SLOTS);
+  return (unsigned)(mix((uint64_t)(uintptr_t)writer ^ mix(r0 ^ mix(r1))) % TABLE_SLOTS);
 }
 
 static struct entry *find_locked(const void *writer, const uint8_t *reader) {
