@@ -33,7 +33,7 @@
   "char_traitsIcESaIcEEESB_RK18rosidl_type_hash_sS3_RK17rmw_qos_profile_sb"
 
 // rmw_gid_t of rmw/types.h: the implementation's identifier, then RMW_GID_STORAGE_SIZE (16) bytes,
-// which rmw_fastrtps fills with the endpoint's GUID (tests/test_uuid_class.py checks the size
+// which rmw_fastrtps fills with the endpoint's GUID (tests/test_signatures.py checks the size
 // against rclpy's endpoint GIDs).
 #define GID_SIZE 16
 struct gid {
