@@ -77,8 +77,8 @@ class ParameterEventFilterState(NamedTuple):
         writers do not send them: nodes run under the guard, or ``writer_filtering='any'``),
         ``'reader'`` (they cross the network and this handler's DDS reader drops them before
         Python: nodes nobody put under the guard), ``'none'`` (not filtered) or ``'unknown'``
-        (no event yet to tell). With both kinds of node, ``'reader'`` once the reader has judged
-        as many events as it took.
+        (no event yet, or a node this process discovered before its first use of cft_action).
+        With both kinds of node, ``'reader'``.
     """
 
     mode: str

@@ -18,7 +18,7 @@ from typing import Any, Callable, Optional, Sequence
 
 # Importing rclpy's C extension loads librcl and friends from the installed wheels; we then bind
 # to those very copies instead of guessing paths. A failed take raises its RCLError, as rclpy's.
-from rclpy import get_rmw_implementation_identifier
+from rclpy import get_rmw_implementation_identifier, ok
 from rclpy.logging import get_logger
 
 from cft_action._rclpy_compat import RCLError
@@ -317,7 +317,6 @@ def _install_writer_marks() -> tuple[bool, str]:
     """Read, from now on, which discovered writers filter for the library's filter classes
     (cft_action/_writer_marks.c). Returns whether every writer this process can discover will be
     seen (no participant of the default context existed yet), and why not."""
-    from rclpy.utilities import ok  # rclpy is loaded already (see the imports above)
     if 'fastrtps' not in get_rmw_implementation_identifier():
         return False, f'{get_rmw_implementation_identifier()} is not rmw_fastrtps'
     if _lib.cft_writer_marks_install() < 0:

@@ -97,7 +97,9 @@ class FeedbackFilterState(NamedTuple):
         does not send it: a guarded server, or ``writer_filtering='any'``), ``'reader'`` (it
         crosses the network and this client's DDS reader drops it before Python: an unguarded
         server), ``'none'`` (not filtered: rclpy drops it in Python), or ``'unknown'`` (no
-        feedback has arrived yet to tell).
+        feedback has arrived yet, or this process discovered the server before its first use of
+        cft_action, which then cannot read the server's discovery data, where a guarded server
+        says that it filters).
     """
 
     mode: str
