@@ -145,7 +145,8 @@ setup(
         Extension(
             'cft_action._cftreader',
             sources=['cft_action/_reader_lock.c', 'cft_action/_reader_class.c',
-                     'cft_action/_patch.c', 'cft_action/_filter_class.c',
+                     'cft_action/_writer_marks.c', 'cft_action/_patch.c',
+                     'cft_action/_filter_class.c',
                      'cft_action/_uuid_program.c', 'cft_action/_node_program.c'],
             libraries=['dl', 'pthread'],
             extra_compile_args=['-O2', '-fvisibility=hidden', '-Wall'],

@@ -12,6 +12,7 @@
 #include <fastrtps/config.h>
 #include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
 #include <fastdds/rtps/builtin/data/ReaderProxyData.h>
+#include <fastdds/rtps/common/CacheChange.h>
 #include <fastdds/rtps/common/SerializedPayload.h>
 #include <cstddef>
 
@@ -20,6 +21,7 @@ using eprosima::fastdds::dds::WriterResourceLimitsQos;
 using eprosima::fastdds::rtps::ContentFilterProperty;
 using eprosima::fastrtps::ResourceLimitedVector;
 using eprosima::fastrtps::string_255;
+using eprosima::fastrtps::rtps::CacheChange_t;
 using eprosima::fastrtps::rtps::ReaderProxyData;
 using eprosima::fastrtps::rtps::SerializedPayload_t;
 
@@ -51,6 +53,11 @@ void cft_fastdds_layout() {
   LAYOUT(STRING255_LENGTH, offsetof(string_255, string_len), "fixed_string<255>::string_len");
   LAYOUT(PAYLOAD_LENGTH, offsetof(SerializedPayload_t, length), "SerializedPayload_t::length");
   LAYOUT(PAYLOAD_DATA, offsetof(SerializedPayload_t, data), "SerializedPayload_t::data");
+  LAYOUT(PAYLOAD_MAX_SIZE, offsetof(SerializedPayload_t, max_size), "SerializedPayload_t::max_size");
+  LAYOUT(CC_KIND, offsetof(CacheChange_t, kind), "CacheChange_t::kind (ChangeKind_t)");
+  LAYOUT(CC_KIND_SIZE, sizeof(CacheChange_t::kind), "sizeof(ChangeKind_t)");
+  LAYOUT(CC_PAYLOAD, offsetof(CacheChange_t, serializedPayload),
+         "CacheChange_t::serializedPayload (SerializedPayload_t)");
   LAYOUT(DWQ_READER_FILTERS,
          offsetof(DataWriterQos, writer_resource_limits_) +
              offsetof(WriterResourceLimitsQos, reader_filters_allocation),

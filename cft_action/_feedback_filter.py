@@ -10,7 +10,7 @@ fails, the filter is abandoned for good and the client behaves as plain rclpy.
 
 from __future__ import annotations
 
-from typing import Any, Callable, ContextManager, Optional
+from typing import Any, Callable, ContextManager, Iterable, Optional
 
 from cft_action._filtered_reader import FilteredReader
 from cft_action._rclpy_compat import PromptLogger
@@ -124,19 +124,27 @@ class FeedbackFilter:
             if self.reader.filter is None:
                 self.plan = None
 
-    def filtered_in(self, feedback_taken: int) -> str:
-        """Where other goals' feedback is dropped; see :class:`cft_action.FeedbackFilterState`."""
-        return self.reader.filtered_in(feedback_taken)
+    def filtered_in(self, feedback_taken: int, writers: Callable[[], Iterable[Any]]) -> str:
+        """Where other goals' feedback is dropped; see :class:`cft_action.FeedbackFilterState`.
 
-    def log_if_unguarded(self, feedback_taken: int) -> None:
-        """Say once that the server does not filter for this client, once there is evidence."""
-        if self._logged_unguarded or feedback_taken > 100:
+        :param writers: The GIDs of the server's feedback writers.
+        """
+        return self.reader.filtered_in(feedback_taken, writers)
+
+    def log_if_unguarded(self, feedback_taken: int, writers: Callable[[], Iterable[Any]]) -> None:
+        """Say once that the server does not filter for this client, once there is evidence.
+
+        Asked at every 10th sample taken, up to the 100th, until the answer is known: it reads the
+        ROS graph.
+        """
+        if self._logged_unguarded or feedback_taken > 100 or feedback_taken % 10:
             return
-        with self.reader.lock:
-            if (self.filtered_in(feedback_taken) != 'reader'
-                    or (self.reader.reader_verdicts or 0) < 10):
-                return
-            self._logged_unguarded = True
+        where = self.filtered_in(feedback_taken, writers)
+        if where == 'unknown':
+            return
+        self._logged_unguarded = True  # asked and answered: once is enough
+        if where != 'reader':
+            return
         self._logger.info(
             "the action server's writer does not filter this client's feedback (the server does "
             "not run under 'cft-action guard'): other goals' feedback crosses the network to this "

@@ -25,7 +25,7 @@
 #define RETCODE_BAD_PARAMETER 3u
 #define RETCODE_OUT_OF_RESOURCES 5u
 
-struct grammar {
+struct cft_filter_grammar {
   void *(*compile)(const char *expression);
   bool (*matches)(const void *program, const void *payload);  // payload: a SerializedPayload_t *
 };
@@ -49,8 +49,8 @@ static bool node_matches(const void *program, const void *payload) {
 
 static void *node_compile(const char *expression) { return cft_node_compile(expression); }
 
-static const struct grammar uuid_grammar = {uuid_compile, uuid_matches};
-static const struct grammar node_grammar = {node_compile, node_matches};
+static const struct cft_filter_grammar uuid_grammar = {uuid_compile, uuid_matches};
+static const struct cft_filter_grammar node_grammar = {node_compile, node_matches};
 
 // Of every filter of this library: verdicts, and filters created or changed (each is a filter
 // event at a writer or a reader of this process).
@@ -60,7 +60,7 @@ static const struct cft_filter_class_owner *owner;
 
 struct filter {
   const void *const *vtable;
-  const struct grammar *grammar;
+  const struct cft_filter_grammar *grammar;
   pthread_rwlock_t lock;  // the program may be replaced while a receive thread evaluates
   void *program;
   unsigned long verdicts;
@@ -83,7 +83,7 @@ static const void *const filter_vtable[] = {(const void *)filter_evaluate};
 
 struct factory {
   const void *const *vtable;
-  const struct grammar *grammar;
+  const struct cft_filter_grammar *grammar;
 };
 
 // filter_parameters is not read: these classes take no parameters.
@@ -159,6 +159,20 @@ void *cft_filter_factory_for(const char *class_name, const struct cft_filter_cla
   if (i < 0) return NULL;
   __atomic_store_n(&owner, by, __ATOMIC_RELEASE);
   return (void *)classes[i].factory;
+}
+
+const struct cft_filter_grammar *cft_filter_class_grammar(const char *class_name) {
+  int i = class_index(class_name);
+  return i < 0 ? NULL : classes[i].factory->grammar;
+}
+
+void *cft_filter_grammar_compile(const struct cft_filter_grammar *grammar, const char *expression) {
+  return grammar->compile(expression);
+}
+
+bool cft_filter_grammar_matches(const struct cft_filter_grammar *grammar, const void *program,
+                                const void *payload) {
+  return grammar->matches(program, payload);
 }
 
 unsigned long cft_filter_verdicts(const void *filter) {

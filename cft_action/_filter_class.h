@@ -25,6 +25,12 @@
 #define CFT_UUID_CLASS "CFT_ACTION_UUID"
 #define CFT_NODE_CLASS "CFT_ACTION_NODE"
 
+// What a writer that filters for these classes (a writer of a guarded process) adds to its
+// USER_DATA, after rmw's "typehash=...;" (a key=value; pair, which rmw's parser skips): the
+// discovery data tells a reader's process which writers filter for it, since their samples carry
+// no filter signature for these classes (_writer_marks.c reads it).
+#define CFT_WRITER_MARK "cft_action=filters;"
+
 // What the library that links this file decides about the filters of its process: whether a
 // factory may create a filter now (the guard creates them for its writers and readers; a client's
 // process only for its own readers, since a writer there would filter unguarded), and what it
@@ -42,6 +48,16 @@ void *cft_filter_factory_for(const char *class_name, const struct cft_filter_cla
 
 // This library's own copy of `class_name` if it names one of these classes, else NULL.
 const char *cft_filter_class_name(const char *class_name);
+
+// The grammar of `class_name` if it names one of these classes, else NULL: for verdicts that the
+// guard gives without a filter instance (_guard_filter.c, "readers the guard keeps itself").
+struct cft_filter_grammar;
+const struct cft_filter_grammar *cft_filter_class_grammar(const char *class_name);
+// `expression` compiled in `grammar`: one malloc'd block (free() it), or NULL outside the grammar.
+void *cft_filter_grammar_compile(const struct cft_filter_grammar *grammar, const char *expression);
+// The program's verdict on a SerializedPayload_t, exactly as a filter of the class gives it.
+bool cft_filter_grammar_matches(const struct cft_filter_grammar *grammar, const void *program,
+                                const void *payload);
 
 // How many verdicts `filter` has given since it was created.
 unsigned long cft_filter_verdicts(const void *filter);

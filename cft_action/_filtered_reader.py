@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import os
 import threading
-from typing import Any, ContextManager, NamedTuple, Optional, Sequence
+from typing import Any, Callable, ContextManager, Iterable, NamedTuple, Optional, Sequence
 
 import rclpy
 
@@ -317,26 +317,28 @@ class FilteredReader:
                 return self._reader_verdicts if self._ended and self.filter_class else None
             return _rcl.filter_class_verdicts(self._created)
 
-    def filtered_in(self, taken: int) -> str:
+    def filtered_in(self, taken: int, writers: Callable[[], Iterable[Any]]) -> str:
         """Where the samples that the filter rejects are dropped, ``taken`` samples in.
 
-        ``'writer'`` (by the writers), ``'reader'`` (by this reader: the writers do not know the
-        filter's class), ``'none'`` (no filter) or ``'unknown'`` (nothing taken yet, or the
-        filter was created by the preloaded guard, whose verdicts are not counted per filter).
+        ``'writer'`` (by the writers), ``'reader'`` (by this reader: a writer does not know the
+        filter's class), ``'none'`` (no filter) or ``'unknown'`` (nothing taken yet, or a writer
+        this process may have discovered before it could tell).
+
+        :param writers: The GIDs (``TopicEndpointInfo.endpoint_gid``) of the topic's publishers
+            in other participants. A writer that filters for the library's classes says so in its
+            discovery data (a guarded one), since its samples carry no filter signature for them
+            (:func:`cft_action._rcl.writer_filters`); asked only for such a class.
         """
         if self._filter is None:  # one reference read: this does not take the reader's lock
             return 'none'
         if not self.filter_class:
             return 'writer'  # DDS-SQL: every Fast DDS writer filters (up to its reader limit)
-        verdicts = self.reader_verdicts
-        if verdicts is None:
+        if not taken:
             return 'unknown'
-        # A guarded writer marks what it sends, so the reader judges only the samples sent in the
-        # moment between a filter change here and its arrival there; an unguarded one marks
-        # nothing, and the reader judges every sample, the rejected ones included.
-        if verdicts and verdicts >= taken:
-            return 'reader'
-        return 'writer' if taken else 'unknown'
+        known = [_rcl.writer_filters(gid) for gid in writers()]
+        if known and all(known):
+            return 'writer'
+        return 'reader' if False in known else 'unknown'
 
     @property
     def updates(self) -> int:

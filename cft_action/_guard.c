@@ -54,8 +54,13 @@
 // vtable slot is a relocation against its exported name), is where _guard_filter.c answers
 // uuid-only filters without deserializing the sample; the fifth,
 // DomainParticipantImpl::find_content_filter_factory, gives the writers the library's own filter
-// classes (_filter_class.h). Only Fast DDS 2.14 has the last two here.
-enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND = 4, FN_COUNT = 5 };
+// classes (_filter_class.h); the sixth, DataWriterImpl::is_relevant (IReaderDataFilter's member,
+// virtual too: the slots of DataWriterImpl's vtable and of its statistics subclass's are
+// R_X86_64_64 relocations against its exported name, no thunk), answers for the readers of those
+// classes that _guard_filter.c keeps out of Fast DDS's filter collection, so that no filter
+// signature is written for them. Only Fast DDS 2.14 has the last three here.
+enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND = 4, FN_REL = 5,
+       FN_COUNT = 6 };
 
 // Fast DDS 2.x (libfastrtps), verified on 2.14.5 (ROS 2 Jazzy wheels), on 2.14.6 built with
 // SECURITY=ON (apt's) and on the 2.14.x head (docs/COMPATIBILITY.md).
@@ -64,6 +69,7 @@ enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND
 #define RRF2 "_ZN8eprosima7fastdds3dds14DataWriterImpl20remove_reader_filterERKNS_8fastrtps4rtps6GUID_tE"
 #define FIND2 "_ZN8eprosima7fastdds3dds21DomainParticipantImpl27find_content_filter_factoryEPKc"
 #define EVAL2 "_ZNK8eprosima7fastdds3dds12DDSSQLFilter19DDSFilterExpression8evaluateERKNS_8fastrtps4rtps19SerializedPayload_tERKNS1_14IContentFilter16FilterSampleInfoERKNS5_6GUID_tE"
+#define REL2 "_ZNK8eprosima7fastdds3dds14DataWriterImpl11is_relevantERKNS_8fastrtps4rtps13CacheChange_tERKNS4_6GUID_tE"
 
 // Fast DDS 3.x (libfastdds), verified on libfastdds.so.3.2 from the ROS 2 Kilted wheels.
 #define PCNC3 "_ZN8eprosima7fastdds3dds14DataWriterImpl25perform_create_new_changeENS0_4rtps12ChangeKind_tEPKvRNS3_11WriteParamsERKNS3_16InstanceHandle_tE"
@@ -92,10 +98,10 @@ struct family {
 };
 
 static struct family families[] = {
-  {"Fast DDS 2", "libfastrtps.so.2.14", "libfastrtps.so", {PCNC2, PRFI2, RRF2, EVAL2, FIND2}, {0}, 0,
-   PTHREAD_MUTEX_INITIALIZER, ""},
-  {"Fast DDS 3", "libfastdds.so.3.2", "libfastdds.so", {PCNC3, PRFI3, RRF3, NULL, NULL}, {0}, 0,
-   PTHREAD_MUTEX_INITIALIZER, ""},
+  {"Fast DDS 2", "libfastrtps.so.2.14", "libfastrtps.so", {PCNC2, PRFI2, RRF2, EVAL2, FIND2, REL2},
+   {0}, 0, PTHREAD_MUTEX_INITIALIZER, ""},
+  {"Fast DDS 3", "libfastdds.so.3.2", "libfastdds.so", {PCNC3, PRFI3, RRF3, NULL, NULL, NULL}, {0},
+   0, PTHREAD_MUTEX_INITIALIZER, ""},
 };
 #define N_FAMILIES ((int)(sizeof(families) / sizeof(families[0])))
 
@@ -293,7 +299,9 @@ static void resolve_locked(int fam, int from_call) {
   }
 
   memcpy(f->real, real, sizeof real);
-  if (state == CFT_GUARD_ACTIVE && real[FN_EVAL] != NULL) cft_filter_enable((cft_evaluate_fn)real[FN_EVAL]);
+  if (state == CFT_GUARD_ACTIVE && real[FN_EVAL] != NULL)
+    cft_filter_enable((cft_evaluate_fn)real[FN_EVAL],
+                      real[FN_REL] != NULL ? our_definition(fam, FN_REL) : NULL);
   __atomic_store_n(&f->state, state, __ATOMIC_RELEASE);
   if (state != CFT_GUARD_ACTIVE)
     cft_say("%s", f->reason);  // the one line the user needs; printed once per family
@@ -333,6 +341,15 @@ static void restore_filtering_writer(const void **saved) { cft_filtering_writer 
       cft_filtering_writer;                                                                     \
   cft_filtering_writer = (writer)
 
+// Opens _guard_filter.c's claim on a reader of the library's classes for the enclosing block (the
+// real process_reader_filter_info), and closes it however the block is left.
+static void close_claim(bool *open) {
+  if (*open) cft_filter_claim_end();
+}
+#define CLAIM_IN_SCOPE(may, writer, guid, info)                                                  \
+  bool claim_open_ __attribute__((cleanup(close_claim))) =                                      \
+      (may) && cft_filter_claim_begin(writer, guid, info)
+
 // FILTERS: 1 where the uuid verdicts of _guard_filter.c know the family's layouts (Fast DDS 2.14).
 #define DEFINE_WRAPPERS(SUFFIX, FAM, FILTERS, PCNC, PRFI, RRF)                                  \
   CFT_EXPORT uint32_t cft_pcnc##SUFFIX(void *self, int kind, const void *data, void *params,    \
@@ -358,6 +375,7 @@ static void restore_filtering_writer(const void **saved) { cft_filtering_writer 
     if (real == NULL) { missing(f, FN_PRFI); return; }                                          \
     if (f->state != CFT_GUARD_ACTIVE) { real(self, guid, info); return; }                       \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
+    CLAIM_IN_SCOPE(FILTERS && scoped_lock_ != NULL, self, guid, info);                          \
     real(self, guid, info);                                                                     \
     if (FILTERS && scoped_lock_ != NULL) cft_filter_reader_changed(self, guid, info);           \
     else if (FILTERS) cft_filter_reader_dropped(self, guid);                                    \
@@ -395,6 +413,27 @@ bool cft_evaluate2(const void *self, const void *payload, const void *sample_inf
   return real(self, payload, sample_info, reader_guid);
 }
 
+// DataWriterImpl::is_relevant of Fast DDS 2.x, `this` being the DataWriterImpl (IReaderDataFilter is
+// its primary base): the verdict for a reader that _guard_filter.c keeps, else Fast DDS's.
+typedef bool (*relevant_fn)(const void *self, const void *change, const void *reader_guid);
+CFT_EXPORT bool cft_is_relevant2(const void *self, const void *change, const void *reader_guid)
+    __asm__(REL2);
+bool cft_is_relevant2(const void *self, const void *change, const void *reader_guid) {
+  struct family *f = ready(0);
+  if (f->state == CFT_GUARD_ACTIVE) {
+    int verdict = cft_filter_relevance(self, change, reader_guid);
+    if (verdict >= 0) return verdict == 1;
+  }
+  relevant_fn real = (relevant_fn)f->real[FN_REL];
+  if (real == NULL) {
+    // Called through a vtable Fast DDS filled, so it is loaded but not one the guard can name:
+    // deliver, as Fast DDS does for a reader it has no filter for.
+    missing(f, FN_REL);
+    return true;
+  }
+  return real(self, change, reader_guid);
+}
+
 // The guard's filters of the library's classes: every one may be created, and each is counted.
 static bool guard_may_create(void) { return true; }
 static void guard_created(void *filter) {
@@ -410,6 +449,9 @@ CFT_EXPORT void *cft_find2(void *self, const char *class_name) __asm__(FIND2);
 void *cft_find2(void *self, const char *class_name) {
   struct family *f = ready(0);
   void *ours = cft_filter_factory_for(class_name, &guard_owner);
+  // A writer asking for the class of a reader that _guard_filter.c keeps: no factory, so that Fast
+  // DDS keeps no filter, and no signature, for it.
+  if (ours != NULL && f->state == CFT_GUARD_ACTIVE && cft_filter_claimed(class_name)) return NULL;
   if (ours != NULL && f->state == CFT_GUARD_ACTIVE) {
     __atomic_fetch_add(&filter_class_lookups, 1, __ATOMIC_RELAXED);
     return ours;
@@ -436,8 +478,8 @@ CFT_EXPORT unsigned long cft_guard_filter_class_count(int which) {
 static void *our_definition(int fam, int fn) {
   static void *const ours[][FN_COUNT] = {
     {(void *)cft_pcnc2, (void *)cft_prfi2, (void *)cft_rrf2, (void *)cft_evaluate2,
-     (void *)cft_find2},
-    {(void *)cft_pcnc3, (void *)cft_prfi3, (void *)cft_rrf3, NULL, NULL},
+     (void *)cft_find2, (void *)cft_is_relevant2},
+    {(void *)cft_pcnc3, (void *)cft_prfi3, (void *)cft_rrf3, NULL, NULL, NULL},
   };
   return ours[fam][fn];
 }

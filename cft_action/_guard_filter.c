@@ -45,6 +45,7 @@
 
 #include "_fastdds_layout.h"
 #include "_guard_filter.h"
+#include "_filter_class.h"
 #include "_guard_log.h"
 #include "_uuid_program.h"
 
@@ -66,7 +67,8 @@ CFT_EXPORT long cft_guard_filter_layout(int which) {
   static const long layout[] = {RPD_TYPE_NAME, RPD_CONTENT_FILTER, CFP_RELATED_TOPIC,
                                 CFP_CLASS_NAME, CFP_EXPRESSION, CFP_PARAMETERS, RLV_VECTOR,
                                 STRING255_SIZE, STRING255_LENGTH, PAYLOAD_LENGTH, PAYLOAD_DATA,
-                                RPD_GUID, RPD_KEY, RPD_TOPIC_NAME};
+                                RPD_GUID, RPD_KEY, RPD_TOPIC_NAME, CC_KIND, CC_KIND_SIZE,
+                                CC_PAYLOAD, PAYLOAD_MAX_SIZE};
   return which >= 0 && which < (int)(sizeof layout / sizeof layout[0]) ? layout[which] : -1;
 #else
   (void)which;
@@ -88,6 +90,9 @@ enum {
   C_FOREIGN,       // entries dropped because a verdict came for another filter instance
   C_VERIFIED,      // verdicts compared with Fast DDS's (CFT_GUARD_VERIFY=1)
   C_MISMATCH,      // of those, disagreements (always 0, or this file is wrong)
+  C_KEPT,          // readers of the library's classes kept in the table instead of Fast DDS's
+  C_LEFT,          // readers of those classes left to Fast DDS (see cft_filter_claim_begin)
+  C_RELEVANCE,     // verdicts given in is_relevant for the readers kept
   C_COUNT
 };
 static unsigned long counters[C_COUNT];
@@ -210,42 +215,49 @@ static bool is_feedback_type(const char *type) {
          ends_with(type, "_FeedbackMessage_");
 }
 
-// The reader's uuid program, or NULL when it has no filter (*filtered false) or one this file
-// does not answer.
-static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool *filtered) {
+// What a reader's discovery data says about its filter, read through the checked layout.
+struct reader_filter {
+  const char *type, *related, *class_name, *expression;
+  const char *params[MAX_PARAMETERS];
+  int param_count;
+};
+
+// Reads the reader's filter into *f. False when the data fails a check (the layout is then
+// suspect, and every verdict goes back to Fast DDS) or the reader has no filter (*filtered false).
+static bool read_reader_filter(const uint8_t *info, const uint8_t *guid, struct reader_filter *f,
+                               bool *filtered) {
   if (!located(info, guid)) {
     layout_suspect("the reader's GUID is not in m_guid and m_key, as a whole or moved");
-    return NULL;
+    return false;
   }
   if (!holds_guid(info, RPD_GUID, guid) || !holds_guid(info, RPD_KEY, guid)) {
     layout_suspect("a reader's GUID is not where the first reader's was");
-    return NULL;
+    return false;
   }
   const uint8_t *cfp = info + RPD_CONTENT_FILTER + shift;
-  const char *type = string255(info + RPD_TYPE_NAME + shift);
   const char *topic = string255(info + RPD_TOPIC_NAME + shift);
-  const char *related = string255(cfp + CFP_RELATED_TOPIC);
-  const char *class_name = string255(cfp + CFP_CLASS_NAME);
-  if (type == NULL || topic == NULL || related == NULL || class_name == NULL) {
+  f->type = string255(info + RPD_TYPE_NAME + shift);
+  f->related = string255(cfp + CFP_RELATED_TOPIC);
+  f->class_name = string255(cfp + CFP_CLASS_NAME);
+  if (f->type == NULL || topic == NULL || f->related == NULL || f->class_name == NULL) {
     layout_suspect("a topic, type or filter class name");
-    return NULL;
+    return false;
   }
-  *filtered = class_name[0] != '\0';
-  if (!*filtered) return NULL;
+  *filtered = f->class_name[0] != '\0';
+  if (!*filtered) return false;
   // Fast DDS filters for a reader only when its filter's related topic is the writer's topic,
   // which the reader's topic is too (they matched).
-  if (strcmp(related, topic) != 0) {
+  if (strcmp(f->related, topic) != 0) {
     layout_suspect("a filter's related topic name that is not its reader's topic name");
-    return NULL;
+    return false;
   }
-  const char *expression;
   size_t length;
-  memcpy(&expression, cfp + CFP_EXPRESSION, sizeof expression);
-  memcpy(&length, cfp + CFP_EXPRESSION + sizeof expression, sizeof length);
-  if (expression == NULL || length >= MAX_EXPRESSION || expression[length] != '\0' ||
-      memchr(expression, '\0', length) != NULL) {
+  memcpy(&f->expression, cfp + CFP_EXPRESSION, sizeof f->expression);
+  memcpy(&length, cfp + CFP_EXPRESSION + sizeof f->expression, sizeof length);
+  if (f->expression == NULL || length >= MAX_EXPRESSION || f->expression[length] != '\0' ||
+      memchr(f->expression, '\0', length) != NULL) {
     layout_suspect("the filter expression");
-    return NULL;
+    return false;
   }
   const uint8_t *begin, *end;
   memcpy(&begin, cfp + CFP_PARAMETERS + RLV_VECTOR, sizeof begin);
@@ -253,31 +265,47 @@ static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool
   if (end < begin || (size_t)(end - begin) % STRING255_SIZE != 0 ||
       (size_t)(end - begin) / STRING255_SIZE > MAX_PARAMETERS) {
     layout_suspect("the expression parameters");
-    return NULL;
+    return false;
   }
-  int param_count = (int)((size_t)(end - begin) / STRING255_SIZE);
-  const char *params[MAX_PARAMETERS];
-  for (int i = 0; i < param_count; i++) {
-    params[i] = string255(begin + (size_t)i * STRING255_SIZE);
-    if (params[i] == NULL) {
+  f->param_count = (int)((size_t)(end - begin) / STRING255_SIZE);
+  for (int i = 0; i < f->param_count; i++) {
+    f->params[i] = string255(begin + (size_t)i * STRING255_SIZE);
+    if (f->params[i] == NULL) {
       layout_suspect("an expression parameter");
-      return NULL;
+      return false;
     }
   }
+  return true;
+}
+
+// The reader's uuid program, or NULL when it has no filter (*filtered false) or one this file
+// does not answer.
+static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool *filtered) {
+  struct reader_filter f;
+  if (!read_reader_filter(info, guid, &f, filtered)) return NULL;
   struct program *program = NULL;
-  if (strcmp(class_name, "DDSSQL") == 0 && strncmp(related, "rt/", 3) == 0 &&
-      ends_with(related, "/_action/feedback") && is_feedback_type(type))
-    program = cft_uuid_compile(expression, params, param_count);
+  if (strcmp(f.class_name, "DDSSQL") == 0 && strncmp(f.related, "rt/", 3) == 0 &&
+      ends_with(f.related, "/_action/feedback") && is_feedback_type(f.type))
+    program = cft_uuid_compile(f.expression, f.params, f.param_count);
   if (cft_debug_enabled())
-    cft_say("reader filter on %s (%s, %s): %s: %.200s", related, type, class_name,
-            program ? "uuid verdicts" : "left to Fast DDS", expression);
+    cft_say("reader filter on %s (%s, %s): %s: %.200s", f.related, f.type, f.class_name,
+            program ? "uuid verdicts" : "left to Fast DDS", f.expression);
   return program;
 }
 #else
 // Built without Fast DDS headers: no layout to read the reader's filter with.
-static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool *filtered) {
-  (void)info, (void)guid, (void)filtered;
+struct reader_filter {
+  const char *class_name, *expression;
+};
+static bool read_reader_filter(const uint8_t *info, const uint8_t *guid, struct reader_filter *f,
+                               bool *filtered) {
+  (void)info, (void)guid, (void)f, (void)filtered;
   layout_suspect(CFT_LAYOUT_SOURCE);
+  return false;
+}
+static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool *filtered) {
+  struct reader_filter f;
+  read_reader_filter(info, guid, &f, filtered);
   return NULL;
 }
 #endif
@@ -286,25 +314,35 @@ static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool
 // Open addressing with a bounded probe. A missing entry is always safe (Fast DDS decides), so a
 // full neighbourhood evicts. Verdicts hold table_lock while they use a program, so an eviction by
 // another writer never frees a program in use.
-#define TABLE_SLOTS 4096
+#define TABLE_SLOTS 16384
 #define PROBE 16
 struct entry {
   const void *writer;      // NULL: free
   uint8_t reader[16];
   const void *instance;    // the filter instance of the first verdict, NULL before it
-  struct program *program;
+  void *program;           // a uuid program, or a program of `kept`'s grammar
+  const struct cft_filter_grammar *kept;  // non-NULL: a reader the guard keeps (see below)
 };
+static unsigned long kept_entries;  // entries with `kept`, for is_relevant's lock-free "none"
 static struct entry table[TABLE_SLOTS];
 static pthread_mutex_t table_lock = PTHREAD_MUTEX_INITIALIZER;
 
+// splitmix64's finalizer: every input bit reaches every output bit. The readers of one writer
+// differ only in a byte or two of their entity id (the last 4 of 16 GUID bytes), which a plain
+// multiply-and-shift left out of the slot's low bits: 40 readers of one writer shared 2 windows.
+static uint64_t mix(uint64_t x) {
+  x ^= x >> 30;
+  x *= 0xBF58476D1CE4E5B9ull;
+  x ^= x >> 27;
+  x *= 0x94D049BB133111EBull;
+  return x ^ (x >> 31);
+}
+
 static unsigned slot_of(const void *writer, const uint8_t *reader) {
-  uint64_t h = (uint64_t)(uintptr_t)writer * 0x9E3779B97F4A7C15ull;
   uint64_t r0, r1;
   memcpy(&r0, reader, 8);
   memcpy(&r1, reader + 8, 8);
-  h ^= (r0 * 0xC2B2AE3D27D4EB4Full) ^ (r1 * 0x165667B19E3779F9ull);
-  h ^= h >> 29;
-  return (unsigned)(h % TABLE_SLOTS);
+  return (unsigned)(mix((uint64_t)(uintptr_t)writer ^ mix(r0 ^ mix(r1))) % TABLE_SLOTS);
 }
 
 static struct entry *find_locked(const void *writer, const uint8_t *reader) {
@@ -317,27 +355,43 @@ static struct entry *find_locked(const void *writer, const uint8_t *reader) {
 }
 
 static void clear_locked(struct entry *e) {
+  if (e->kept != NULL) __atomic_fetch_sub(&kept_entries, 1, __ATOMIC_RELAXED);
   free(e->program);
   memset(e, 0, sizeof *e);
 }
 
+// A free slot in the entry's window, or its own; NULL when every slot is another's.
+static struct entry *room_locked(const void *writer, const uint8_t *reader) {
+  struct entry *e = find_locked(writer, reader);
+  unsigned home = slot_of(writer, reader);
+  for (unsigned i = 0; i < PROBE && e == NULL; i++)
+    if (table[(home + i) % TABLE_SLOTS].writer == NULL) e = &table[(home + i) % TABLE_SLOTS];
+  return e;
+}
+
 // Entries are never moved, so a free slot inside a probe window does not end a search: lookups
 // always look at the whole window.
-static void store_locked(const void *writer, const uint8_t *reader, struct program *program) {
-  struct entry *e = find_locked(writer, reader);
+// A full window evicts an entry that is not a kept reader's when it has one (a kept reader evicted
+// receives every sample, with no signature, and its own reader filters them).
+static void store_locked(const void *writer, const uint8_t *reader, void *program,
+                         const struct cft_filter_grammar *kept) {
+  struct entry *e = room_locked(writer, reader);
   if (e == NULL) {
     unsigned home = slot_of(writer, reader);
-    for (unsigned i = 0; i < PROBE && e == NULL; i++)
-      if (table[(home + i) % TABLE_SLOTS].writer == NULL) e = &table[(home + i) % TABLE_SLOTS];
-    if (e == NULL) {
-      e = &table[home];
-      count(C_EVICTED);
-    }
+    e = &table[home];
+    for (unsigned i = 0; i < PROBE; i++)
+      if (table[(home + i) % TABLE_SLOTS].kept == NULL) {
+        e = &table[(home + i) % TABLE_SLOTS];
+        break;
+      }
+    count(C_EVICTED);
   }
   clear_locked(e);
   e->writer = writer;
   memcpy(e->reader, reader, 16);
   e->program = program;
+  e->kept = kept;
+  if (kept != NULL) __atomic_fetch_add(&kept_entries, 1, __ATOMIC_RELAXED);
 }
 
 static void drop(const void *writer, const void *reader_guid, int why) {
@@ -354,8 +408,10 @@ static void drop(const void *writer, const void *reader_guid, int why) {
 // ---- the hooks -------------------------------------------------------------------------------------
 static cft_evaluate_fn real_evaluate;  // set once, before the family turns active
 static bool enabled, verify;
+static const void *relevance_slot;     // the guard's is_relevant, or NULL: no reader is kept
+static bool keep_readers;              // CFT_GUARD_KEEP_READERS is not 0
 
-void cft_filter_enable(cft_evaluate_fn real) {
+void cft_filter_enable(cft_evaluate_fn real, const void *guard_is_relevant) {
   void *handle = dlopen("libfastrtps.so.2.14", RTLD_LAZY | RTLD_NOLOAD);
   if (handle != NULL) {
     loaded_security = dlsym(handle, SECURITY_ONLY_SYMBOL) != NULL ? "1" : "0";
@@ -363,16 +419,133 @@ void cft_filter_enable(cft_evaluate_fn real) {
   }
   const char *off = getenv("CFT_GUARD_ACCELERATE");
   const char *check = getenv("CFT_GUARD_VERIFY");
+  const char *keep = getenv("CFT_GUARD_KEEP_READERS");
   real_evaluate = real;
   verify = check != NULL && check[0] != '\0' && strcmp(check, "0") != 0;
   enabled = !(off != NULL && strcmp(off, "0") == 0);
+  relevance_slot = guard_is_relevant;
+  keep_readers = guard_is_relevant != NULL && CFT_LAYOUT_KNOWN && !(keep != NULL && strcmp(keep, "0") == 0);
   if (cft_debug_enabled())
-    cft_say("uuid filter verdicts %s%s", enabled ? "on" : "off (CFT_GUARD_ACCELERATE=0)",
-            verify ? ", each checked against Fast DDS (CFT_GUARD_VERIFY)" : "");
+    cft_say("uuid filter verdicts %s%s; readers of the library's classes %s",
+            enabled ? "on" : "off (CFT_GUARD_ACCELERATE=0)",
+            verify ? ", each checked against Fast DDS (CFT_GUARD_VERIFY)" : "",
+            keep_readers ? "kept by the guard" : "left to Fast DDS");
+}
+
+// ---- readers the guard keeps itself ----------------------------------------------------------------
+// Fast DDS 2.14 writes PID_CONTENT_FILTER_INFO, 16 bytes of signature per reader of its writer's
+// ReaderFilterCollection, into every DATA that writer sends, to every reader. A reader whose filter
+// is of one of the library's classes (_filter_class.h) judges a sample from a few bytes, so the
+// signature saves it nothing; it is kept out of the collection instead, and the guard answers for
+// it where the RTPS writer asks whether a change is relevant for a reader:
+// DataWriterImpl::is_relevant, IReaderDataFilter's one member, which ReaderProxy::rtps_is_relevant
+// (reliable writers: once per change and reader, when the change is added or a late joiner
+// matched) and StatelessWriter (best effort: at each send) call through the writer's vtable.
+//
+// How a reader gets here. _guard.c calls cft_filter_claim_begin before the real
+// process_reader_filter_info, with the writer's stripe held. If the reader's filter is of a
+// library class and compiles, the claim is open on this thread. Fast DDS then checks what it
+// always checks (the writer filters at all, the reader is not reached by data-sharing and has no
+// multicast locator, its filter's related topic is the writer's, the collection has room) and
+// only then asks find_content_filter_factory for the class: there _guard.c asks
+// cft_filter_claimed, which answers true once, and returns no factory, so that Fast DDS keeps no
+// entry for the reader (and drops one it had). After the real member, cft_filter_reader_changed
+// stores the program as a kept entry if Fast DDS asked, and drops the reader's entry otherwise. So
+// exactly the readers Fast DDS would have filtered for are filtered for, by the same program as the
+// class's filter instance would have run (cft_filter_grammar_matches), without their signature.
+//
+// The verdict is given when the RTPS writer asks, not when the sample is written: for a reliable
+// writer that is in the same write, with the stripe held, so the filter is the one Fast DDS would
+// have used; a best-effort writer asks at each send and gets the filter of that moment.
+//
+// A writer is kept only if its vtable's first slot (IReaderDataFilter's is_relevant, the primary
+// base's member: DataWriterImpl derives from it first) is the guard's definition, i.e. the virtual
+// call lands here; otherwise, and if the table has no room, Fast DDS keeps the reader as before.
+struct claim {
+  bool open, asked;
+  const void *writer;
+  uint8_t reader[16];
+  const struct cft_filter_grammar *grammar;
+  void *program;
+};
+static __thread struct claim claim;
+
+static void say_once(bool *said, const char *what) {
+  if (!__atomic_exchange_n(said, true, __ATOMIC_RELAXED)) cft_say("%s", what);
+}
+
+bool cft_filter_claim_begin(const void *writer, const void *reader_guid, const void *reader_info) {
+  if (!keep_readers || reader_guid == NULL || reader_info == NULL ||
+      __atomic_load_n(&layout_failed, __ATOMIC_RELAXED))
+    return false;
+  const void *const *vtable = *(const void *const *const *)writer;
+  if (vtable[0] != relevance_slot) {
+    static bool said;
+    say_once(&said, "a writer whose vtable does not call the guard's is_relevant: its readers of "
+                    "the library's filter classes keep Fast DDS's filter signatures");
+    count(C_LEFT);
+    return false;
+  }
+  struct reader_filter f;
+  bool filtered = false;
+  if (!read_reader_filter(reader_info, reader_guid, &f, &filtered)) return false;
+  const struct cft_filter_grammar *grammar = cft_filter_class_grammar(f.class_name);
+  if (grammar == NULL) return false;
+  // An expression outside the class's grammar: its factory refuses it too, and Fast DDS keeps no
+  // filter for the reader, which then receives every sample.
+  void *program = cft_filter_grammar_compile(grammar, f.expression);
+  if (program == NULL) return false;
+  pthread_mutex_lock(&table_lock);
+  bool room = room_locked(writer, reader_guid) != NULL;
+  pthread_mutex_unlock(&table_lock);
+  if (!room) {
+    free(program);
+    count(C_LEFT);
+    return false;
+  }
+  claim = (struct claim){true, false, writer, {0}, grammar, program};
+  memcpy(claim.reader, reader_guid, 16);
+  return true;
+}
+
+bool cft_filter_claimed(const char *class_name) {
+  if (!claim.open || claim.asked || cft_filter_class_grammar(class_name) != claim.grammar) return false;
+  claim.asked = true;
+  return true;
+}
+
+void cft_filter_claim_end(void) {
+  free(claim.program);  // still here unless cft_filter_reader_changed stored it
+  memset(&claim, 0, sizeof claim);
+}
+
+// Ends an open claim for this reader: true when it was this reader's.
+static bool settle_claim(const void *writer, const void *reader_guid) {
+  if (!claim.open || claim.writer != writer || memcmp(claim.reader, reader_guid, 16) != 0)
+    return false;
+  pthread_mutex_lock(&table_lock);
+  if (claim.asked) {
+    store_locked(writer, reader_guid, claim.program, claim.grammar);
+    claim.program = NULL;
+  } else {
+    struct entry *e = find_locked(writer, reader_guid);
+    if (e != NULL) clear_locked(e);
+  }
+  pthread_mutex_unlock(&table_lock);
+  count(claim.asked ? C_KEPT : C_DROPPED);
+  if (cft_debug_enabled())
+    cft_say("reader of a library filter class %s", claim.asked ? "kept by the guard" :
+            "not filtered by this writer (Fast DDS would not filter for it)");
+  claim.open = false;
+  return true;
 }
 
 void cft_filter_reader_changed(const void *writer, const void *reader_guid, const void *reader_info) {
-  if (!enabled || reader_guid == NULL) return;
+  if (reader_guid == NULL || settle_claim(writer, reader_guid)) return;
+  if (!enabled) {
+    drop(writer, reader_guid, C_DROPPED);  // a kept reader whose filter left the classes
+    return;
+  }
   bool filtered = reader_info != NULL;
   struct program *program = reader_info != NULL && !__atomic_load_n(&layout_failed, __ATOMIC_RELAXED)
                                 ? program_of(reader_info, reader_guid, &filtered) : NULL;
@@ -383,12 +556,48 @@ void cft_filter_reader_changed(const void *writer, const void *reader_guid, cons
   }
   count(C_COMPILED);
   pthread_mutex_lock(&table_lock);
-  store_locked(writer, reader_guid, program);
+  store_locked(writer, reader_guid, program, NULL);
   pthread_mutex_unlock(&table_lock);
 }
 
 void cft_filter_reader_dropped(const void *writer, const void *reader_guid) {
-  if (enabled) drop(writer, reader_guid, C_DROPPED);
+  drop(writer, reader_guid, C_DROPPED);
+}
+
+// The kept reader's verdict on a change: 1 or 0, or -1 when the reader is not kept for this writer
+// (Fast DDS's own is_relevant answers then) or the change is not ALIVE (always relevant, as in
+// ReaderFilterCollection::update_filter_info).
+int cft_filter_relevance(const void *writer, const void *change, const void *reader_guid) {
+  if (__atomic_load_n(&kept_entries, __ATOMIC_RELAXED) == 0 || reader_guid == NULL ||
+      __atomic_load_n(&layout_failed, __ATOMIC_RELAXED))
+    return -1;
+#if CFT_LAYOUT_KNOWN
+  const uint8_t *c = change;
+  uint32_t kind, length, max_size;
+  const void *data;
+  _Static_assert(CC_KIND_SIZE == sizeof kind, "ChangeKind_t is not 4 bytes");
+  memcpy(&kind, c + CC_KIND, sizeof kind);
+  memcpy(&length, c + CC_PAYLOAD + PAYLOAD_LENGTH, sizeof length);
+  memcpy(&data, c + CC_PAYLOAD + PAYLOAD_DATA, sizeof data);
+  memcpy(&max_size, c + CC_PAYLOAD + PAYLOAD_MAX_SIZE, sizeof max_size);
+  // ChangeKind_t has 4 values, ALIVE first; a payload fits its buffer.
+  if (kind > 3 || length > max_size || (length > 0 && data == NULL)) {
+    layout_suspect("a change whose kind or payload is not where the headers have them");
+    return -1;
+  }
+  if (kind != 0) return -1;
+  int verdict = -1;
+  pthread_mutex_lock(&table_lock);
+  struct entry *e = find_locked(writer, reader_guid);
+  if (e != NULL && e->kept != NULL)
+    verdict = cft_filter_grammar_matches(e->kept, e->program, c + CC_PAYLOAD);
+  pthread_mutex_unlock(&table_lock);
+  if (verdict >= 0) count(C_RELEVANCE);
+  return verdict;
+#else
+  (void)writer, (void)change;
+  return -1;
+#endif
 }
 
 // 1 or 0 from the uuid program, -1 when there is none for this verdict.
@@ -401,7 +610,7 @@ static int uuid_verdict(const void *self, const void *payload, const void *reade
   int verdict = -1;
   pthread_mutex_lock(&table_lock);
   struct entry *e = find_locked(writer, reader_guid);
-  if (e != NULL) {
+  if (e != NULL && e->kept == NULL) {
     if (e->instance == NULL) e->instance = self;
     if (e->instance == self) {
       verdict = cft_uuid_matches(e->program, uuid);

@@ -20,10 +20,23 @@ void cft_filter_reader_changed(const void *writer, const void *reader_guid, cons
 // The reader went away, or changed while the stripe could not be held: its verdicts go to Fast DDS.
 void cft_filter_reader_dropped(const void *writer, const void *reader_guid);
 
-// Set by _guard.c once it resolved the real DDSFilterExpression::evaluate of the known Fast DDS.
+// Set by _guard.c once it resolved the real DDSFilterExpression::evaluate of the known Fast DDS;
+// guard_is_relevant: the guard's DataWriterImpl::is_relevant when the real one was found too
+// (readers of the library's classes may then be kept by the guard), else NULL.
 typedef bool (*cft_evaluate_fn)(const void *self, const void *payload, const void *sample_info,
                                 const void *reader_guid);
-void cft_filter_enable(cft_evaluate_fn real_evaluate);
+void cft_filter_enable(cft_evaluate_fn real_evaluate, const void *guard_is_relevant);
+
+// Around the real process_reader_filter_info, with the writer's stripe held: begin opens a claim
+// on a reader of the library's classes (true if it did); Fast DDS's find_content_filter_factory
+// asks cft_filter_claimed, which is true once for the claimed class (return no factory then);
+// cft_filter_reader_changed settles it; cft_filter_claim_end closes it however the call ended.
+bool cft_filter_claim_begin(const void *writer, const void *reader_guid, const void *reader_info);
+bool cft_filter_claimed(const char *class_name);
+void cft_filter_claim_end(void);
+
+// DataWriterImpl::is_relevant for a reader the guard keeps: 1 or 0; -1 when Fast DDS answers.
+int cft_filter_relevance(const void *writer, const void *change, const void *reader_guid);
 // The verdict for one sample and one reader: the uuid program's when there is one for the
 // filtering writer and this reader, else real_evaluate's.
 bool cft_filter_evaluate(const void *self, const void *payload, const void *sample_info,

@@ -20,7 +20,15 @@
 //
 // The maximum is only a bound: the filter collection and every change's list of filtered-out
 // readers grow as readers come. What grows with it is PID_CONTENT_FILTER_INFO, 16 bytes per
-// filtered reader in every DATA, whose 16-bit length caps it at 4063 readers.
+// filtered reader in every DATA, whose 16-bit length caps it at 4063 readers (readers of the
+// library's classes are not in it: _guard_filter.c keeps them).
+//
+// The same call marks the writer in its discovery data. get_datawriter_qos fills USER_DATA with
+// what rmw_dds_common::encode_type_hash_for_user_data_qos (librmw_dds_common, through the PLT)
+// returns, "typehash=...;". Inside the guard's get_datawriter_qos, where the guard filters for the
+// library's classes, the definition below appends CFT_WRITER_MARK to it: since the samples of such
+// a writer carry no filter signature for those classes, that is how a reader's process tells a
+// writer that filters for it from one that does not (_writer_marks.c). Readers are not marked.
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -28,16 +36,25 @@
 #include <limits.h>
 #include <stdbool.h>
 #include <stddef.h>
+#include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 
 #include "_fastdds_layout.h"
+#include "_filter_class.h"
 #include "_guard.h"
 #include "_guard_log.h"
 
 #define GET_DATAWRITER_QOS \
   "_Z18get_datawriter_qosRK17rmw_qos_profile_sRK18rosidl_type_hash_sRN8eprosima7fastdds3dds13DataWriterQosE"
 #define RMW_SHARED_SONAME "librmw_fastrtps_shared_cpp.so"
+#define ENCODE_TYPE_HASH                                                                         \
+  "_ZN14rmw_dds_common34encode_type_hash_for_user_data_qosERK18rosidl_type_hash_sRNSt7__cxx1112" \
+  "basic_stringIcSt11char_traitsIcESaIcEEE"
+#define RMW_DDS_COMMON_SONAME "librmw_dds_common.so"
+// std::string::append(const char *) of libstdc++'s C++11 ABI, the std::string rmw passes.
+#define STRING_APPEND "_ZNSt7__cxx1112basic_stringIcSt11char_traitsIcESaIcEE6appendEPKc"
+#define LIBSTDCXX_SONAME "libstdc++.so.6"
 
 // The offset of writer_resource_limits().reader_filters_allocation in DataWriterQos, a
 // ResourceLimitedContainerConfig {size_t initial, maximum, increment}, from the headers the guard
@@ -133,6 +150,46 @@ static void raise_reader_filters(void *qos) {
 #endif
 }
 
+// ---- the writer's mark --------------------------------------------------------------------------
+typedef int32_t (*encode_fn)(const void *type_hash, void *string_out);  // rmw_ret_t, std::string &
+typedef void *(*append_fn)(void *string, const char *text);
+static __thread bool marking;  // inside the guard's get_datawriter_qos of a writer it filters for
+static unsigned long marked;
+static encode_fn real_encode;
+static append_fn string_append;
+
+static void find_encode(void) {
+  if (__atomic_load_n(&real_encode, __ATOMIC_ACQUIRE) != NULL) return;
+  // The handles are kept on purpose: the pointers must not outlive the libraries.
+  void *common = dlopen(RMW_DDS_COMMON_SONAME, RTLD_LAZY | RTLD_NOLOAD);
+  void *cxx = dlopen(LIBSTDCXX_SONAME, RTLD_LAZY | RTLD_NOLOAD);
+  void *append = cxx != NULL ? dlsym(cxx, STRING_APPEND) : NULL;
+  void *encode = common != NULL ? dlsym(common, ENCODE_TYPE_HASH) : NULL;
+  if (encode == NULL) encode = dlsym(RTLD_NEXT, ENCODE_TYPE_HASH);
+  __atomic_store_n(&string_append, (append_fn)append, __ATOMIC_RELAXED);
+  __atomic_store_n(&real_encode, (encode_fn)encode, __ATOMIC_RELEASE);
+}
+
+CFT_EXPORT int32_t cft_encode_type_hash(const void *type_hash, void *string_out)
+    __asm__(ENCODE_TYPE_HASH);
+int32_t cft_encode_type_hash(const void *type_hash, void *string_out) {
+  find_encode();
+  encode_fn real = __atomic_load_n(&real_encode, __ATOMIC_ACQUIRE);
+  if (real == NULL) {
+    // Only rmw calls this, and it is linked against the real one: not reached in practice. rmw
+    // then goes on without the type hash in USER_DATA, and says so.
+    cft_say("no real definition of encode_type_hash_for_user_data_qos");
+    return 1;  // RMW_RET_ERROR
+  }
+  int32_t ret = real(type_hash, string_out);
+  append_fn append = __atomic_load_n(&string_append, __ATOMIC_RELAXED);
+  if (ret == 0 && marking && append != NULL) {
+    append(string_out, CFT_WRITER_MARK);
+    __atomic_fetch_add(&marked, 1, __ATOMIC_RELAXED);
+  }
+  return ret;
+}
+
 CFT_EXPORT bool cft_get_datawriter_qos(const void *profile, const void *type_hash, void *qos)
     __asm__(GET_DATAWRITER_QOS);
 bool cft_get_datawriter_qos(const void *profile, const void *type_hash, void *qos) {
@@ -143,17 +200,21 @@ bool cft_get_datawriter_qos(const void *profile, const void *type_hash, void *qo
     cft_say("no real definition of get_datawriter_qos; the writer is not created");
     return false;
   }
+  // The guard filters for the library's classes where it locks (cft_find2 in _guard.c).
+  marking = cft_guard_knows_fastdds2();
   bool ok = real(profile, type_hash, qos);
+  marking = false;
   if (ok) raise_reader_filters(qos);
   return ok;
 }
 
 // ---- the C API, for ctypes -----------------------------------------------------------------------
 // 0: writers whose limit was raised; 1: writers left at Fast DDS's 32 (see the stderr line);
-// 2: the maximum that raised writers get.
+// 2: the maximum that raised writers get; 3: writers marked in their discovery data.
 CFT_EXPORT unsigned long cft_guard_writer_qos_count(int which) {
   if (which >= 0 && which < COUNTERS) return __atomic_load_n(&counters[which], __ATOMIC_RELAXED);
   if (which == COUNTERS) return reader_filters_wanted();
+  if (which == COUNTERS + 1) return __atomic_load_n(&marked, __ATOMIC_RELAXED);
   return 0;
 }
 

@@ -77,8 +77,8 @@ class ParameterEventFilterState(NamedTuple):
         writers do not send them: nodes run under the guard, or ``writer_filtering='any'``),
         ``'reader'`` (they cross the network and this handler's DDS reader drops them before
         Python: nodes nobody put under the guard), ``'none'`` (not filtered) or ``'unknown'``
-        (no event yet to tell). With both kinds of node, ``'reader'`` once the reader has judged
-        as many events as it took.
+        (no event yet, or a node this process discovered before its first use of cft_action).
+        With both kinds of node, ``'reader'``.
     """
 
     mode: str
@@ -171,6 +171,7 @@ class ParameterEventFilter:
         self._user: Optional[ContentFilterOptions] = None
         publishers = RemotePublishers(node, PARAMETER_EVENTS_TOPIC,
                                       (PARAMETER_EVENTS_TOPIC, '/rosout'))
+        self._publishers = publishers
         self._gate = ArrivalGate(node, lambda: parameter_services(publishers), self.reader.lock)
         self._received_lock = threading.Lock()  # the event path takes only this one
         self._received = 0
@@ -182,7 +183,8 @@ class ParameterEventFilter:
         with self._received_lock:
             received = self._received
         return self._state._replace(events_received=received,
-                                    filtered_in=self.reader.filtered_in(received))
+                                    filtered_in=self.reader.filtered_in(
+                                        received, self._publishers.gids))
 
     def subscribe(self, node: Node, deliver: Callable[[ParameterEvent], None],
                   cft_supported: bool, **kwargs: Any) -> Subscription:

@@ -6,6 +6,7 @@
 #include <dlfcn.h>
 #include <elf.h>
 #include <link.h>
+#include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
@@ -64,6 +65,7 @@ struct got_search {
   const char *symbol;
   void **slot;
   int found_library;
+  uintptr_t begin, end;  // the library's mapped segments: where its lazy PLT stubs are
 };
 
 static int find_got_slot(struct dl_phdr_info *info, size_t size, void *data) {
@@ -74,9 +76,15 @@ static int find_got_slot(struct dl_phdr_info *info, size_t size, void *data) {
   if (base == NULL || strncmp(base, s->soname, strlen(s->soname)) != 0) return 0;
   s->found_library = 1;
   const ElfW(Dyn) *dyn = NULL;
-  for (int i = 0; i < info->dlpi_phnum; i++)
-    if (info->dlpi_phdr[i].p_type == PT_DYNAMIC)
-      dyn = (const ElfW(Dyn) *)(info->dlpi_addr + info->dlpi_phdr[i].p_vaddr);
+  s->begin = UINTPTR_MAX;
+  for (int i = 0; i < info->dlpi_phnum; i++) {
+    const ElfW(Phdr) *ph = &info->dlpi_phdr[i];
+    if (ph->p_type == PT_DYNAMIC) dyn = (const ElfW(Dyn) *)(info->dlpi_addr + ph->p_vaddr);
+    if (ph->p_type != PT_LOAD) continue;
+    uintptr_t start = info->dlpi_addr + ph->p_vaddr;
+    if (start < s->begin) s->begin = start;
+    if (start + ph->p_memsz > s->end) s->end = start + ph->p_memsz;
+  }
   if (dyn == NULL) return 1;
   const ElfW(Rela) *jmprel = NULL;
   size_t pltrelsz = 0;
@@ -102,12 +110,14 @@ static int find_got_slot(struct dl_phdr_info *info, size_t size, void *data) {
 }
 
 int cft_patch_got(const char *soname, const char *symbol, void *expected, void *to) {
-  struct got_search s = {soname, symbol, NULL, 0};
+  struct got_search s = {soname, symbol, NULL, 0, 0, 0};
   dl_iterate_phdr(find_got_slot, &s);
   if (s.slot == NULL) return -1;
   void *current = __atomic_load_n(s.slot, __ATOMIC_ACQUIRE);
   if (current == to) return 1;
-  if (current != expected) return 0;
+  // A slot not bound yet (lazy binding) points into the library's own PLT: nobody redirected it.
+  bool unbound = (uintptr_t)current >= s.begin && (uintptr_t)current < s.end;
+  if (current != expected && !unbound) return 0;
   return store_slot(s.slot, to) == 0 ? 1 : -1;
 }
 

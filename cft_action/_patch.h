@@ -10,7 +10,8 @@
 int cft_patch_vtable(void *library, const char *vtable, void *from, void *to);
 
 // Point the PLT slot through which the loaded library whose file name starts with `soname` calls
-// `symbol` at `to`, if it holds `expected` (the definition it was bound to). Returns 1 if
+// `symbol` at `to`, if it holds `expected` (the definition it was bound to) or is not bound yet
+// (lazy binding: it points into that library's own PLT). Returns 1 if
 // replaced, 0 if the slot holds something else (it was already redirected: left alone), -1 if
 // there is no such library or slot.
 int cft_patch_got(const char *soname, const char *symbol, void *expected, void *to);

@@ -18,7 +18,7 @@ from typing import Any, Callable, Optional, Sequence
 
 # Importing rclpy's C extension loads librcl and friends from the installed wheels; we then bind
 # to those very copies instead of guessing paths. A failed take raises its RCLError, as rclpy's.
-from rclpy import get_rmw_implementation_identifier
+from rclpy import get_rmw_implementation_identifier, ok
 from rclpy.logging import get_logger
 
 from cft_action._rclpy_compat import RCLError
@@ -202,6 +202,9 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'cft_filter_class_begin': (_reader_lock, None, [ctypes.c_char_p], None),
     'cft_filter_class_end': (_reader_lock, _void_p, [], None),
     'cft_filter_class_verdicts': (_reader_lock, ctypes.c_ulong, [_void_p], None),
+    'cft_writer_marks_install': (_reader_lock, ctypes.c_int, [], None),
+    'cft_writer_marks_error': (_reader_lock, ctypes.c_char_p, [], None),
+    'cft_writer_is_marked': (_reader_lock, ctypes.c_int, [ctypes.c_char_p], None),
     # The Python C API, to reach the C functions that rosidl generates for every message type.
     'PyCapsule_GetName': (ctypes.pythonapi, ctypes.c_char_p, [ctypes.py_object], None),
     'PyCapsule_GetPointer':
@@ -305,12 +308,36 @@ def filter_class_status() -> str:
 
 
 def filter_class_verdicts(created_filter: int) -> int:
-    """How many samples the filter returned by :func:`set_content_filter` judged in this process.
-
-    A writer that filters for the reader marks its samples, and the reader then does not judge
-    them: verdicts here mean that the writer sent samples without filtering them.
-    """
+    """How many samples the filter returned by :func:`set_content_filter` judged in this process:
+    every sample that reached the reader (a writer filters for it without a signature)."""
     return _lib.cft_filter_class_verdicts(created_filter)
+
+
+def _install_writer_marks() -> tuple[bool, str]:
+    """Read, from now on, which discovered writers filter for the library's filter classes
+    (cft_action/_writer_marks.c). Returns whether every writer this process can discover will be
+    seen (no participant of the default context existed yet), and why not."""
+    if 'fastrtps' not in get_rmw_implementation_identifier():
+        return False, f'{get_rmw_implementation_identifier()} is not rmw_fastrtps'
+    if _lib.cft_writer_marks_install() < 0:
+        return False, (_lib.cft_writer_marks_error() or b'').decode('utf-8', 'replace')
+    if ok():
+        return False, ('cft_action was first used after rclpy.init(): writers discovered before '
+                       'are not known')
+    return True, ''
+
+
+# At the first use of the package's ROS side, which a program normally does before rclpy.init().
+_WRITER_MARKS_COMPLETE, WRITER_MARKS_REASON = _install_writer_marks()
+
+
+def writer_filters(gid: bytes) -> Optional[bool]:
+    """Whether the writer with this GID filters for the library's filter classes (a guarded
+    writer, which marks its discovery data): True, False, or None when this process may have
+    discovered it before it could read the marks (:data:`WRITER_MARKS_REASON`)."""
+    if _lib.cft_writer_is_marked(bytes(gid)[:16]):
+        return True
+    return False if _WRITER_MARKS_COMPLETE else None
 
 
 _reader_lock_tried = False

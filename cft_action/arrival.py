@@ -156,6 +156,10 @@ class RemotePublishers:
                 found.setdefault(participant, []).append(info)
         return found
 
+    def gids(self) -> list[Any]:
+        """The GIDs (``endpoint_gid``) of the other participants' publishers."""
+        return [info.endpoint_gid for infos in self.by_participant().values() for info in infos]
+
     def any(self) -> bool:
         """Whether a publisher may be in another participant: True while the own one is unknown."""
         return self.own() is None or bool(self.by_participant())

@@ -104,7 +104,9 @@ class FeedbackFilterState(NamedTuple):
         does not send it: a guarded server, or ``writer_filtering='any'``), ``'reader'`` (it
         crosses the network and this client's DDS reader drops it before Python: an unguarded
         server), ``'none'`` (not filtered: rclpy drops it in Python), or ``'unknown'`` (no
-        feedback has arrived yet to tell).
+        feedback has arrived yet, or this process discovered the server before its first use of
+        cft_action, which then cannot read the server's discovery data, where a guarded server
+        says that it filters).
     """
 
     mode: str
@@ -254,7 +256,8 @@ class ActionClient(CompatActionClient):
                 feedback_taken=self._feedback_taken, feedback_dropped=self._feedback_dropped,
                 confirmed=plan is None or self._arrival.is_confirmed(self._held_goals.needed()),
                 held_goals=self._held_goals.count, arrival_timeouts=self._arrival.timeouts,
-                filtered_in=self._filter.filtered_in(self._feedback_taken),
+                filtered_in=self._filter.filtered_in(self._feedback_taken,
+                                                     self._feedback_writers.gids),
                 holds_suspended=self._held_goals.suspended)
 
     def new_goal_uuid(self) -> UUID:
@@ -406,7 +409,7 @@ class ActionClient(CompatActionClient):
         feedback = data.get('feedback')
         if feedback is not None:
             self._feedback_taken += 1
-            self._filter.log_if_unguarded(self._feedback_taken)
+            self._filter.log_if_unguarded(self._feedback_taken, self._feedback_writers.gids)
             if self._finished_goals.dropped(bytes(feedback.goal_id.uuid), stamp):
                 self._feedback_dropped += 1
                 del data['feedback']

@@ -129,7 +129,8 @@ def call_counts() -> dict[str, int]:
 
 #: The counters of cft_guard_filter_count() in _guard_filter.c, in its order.
 FILTER_COUNTERS = ('uuid_verdicts', 'fastdds_verdicts', 'compiled', 'not_compiled', 'dropped',
-                   'evicted', 'foreign_instance', 'verified', 'mismatches')
+                   'evicted', 'foreign_instance', 'verified', 'mismatches', 'kept', 'left',
+                   'relevance_verdicts')
 
 
 def filter_counts() -> dict[str, int]:
@@ -146,7 +147,13 @@ def filter_counts() -> dict[str, int]:
       reader went away or changed unseen, because the table was full, or because a verdict came for
       another filter instance;
     - ``verified`` / ``mismatches``: with ``CFT_GUARD_VERIFY=1``, verdicts also asked of Fast DDS,
-      and how many of them disagreed (0, or the guard is wrong).
+      and how many of them disagreed (0, or the guard is wrong);
+    - ``kept``: readers of the library's filter classes that the guard keeps itself, out of Fast
+      DDS's filter collection, so that no filter signature is written for them (each reader once
+      per writer and filter change); ``left``: such readers left to Fast DDS (the writer's virtual
+      call would not reach the guard, or the guard's table was full); ``relevance_verdicts``: the
+      verdicts given for kept readers when the writer asked whether a sample is relevant to them.
+      ``CFT_GUARD_KEEP_READERS=0`` leaves every reader to Fast DDS.
 
     An empty dict when the guard is not preloaded.
     """
@@ -186,7 +193,7 @@ def filter_class_counts() -> dict[str, int]:
 
 
 #: The counters of cft_guard_writer_qos_count() in _guard_writer_qos.c, in its order.
-WRITER_QOS_COUNTERS = ('raised', 'left', 'reader_filters')
+WRITER_QOS_COUNTERS = ('raised', 'left', 'reader_filters', 'marked')
 
 
 def writer_limits() -> dict[str, int]:
@@ -200,7 +207,10 @@ def writer_limits() -> dict[str, int]:
     - ``raised``: writers created with the raised limit;
     - ``left``: writers left at 32, because the guard does not know this Fast DDS or its QoS did not
       hold the expected default (the guard says why on stderr, once);
-    - ``reader_filters``: the limit that raised writers get (32: not raised).
+    - ``reader_filters``: the limit that raised writers get (32: not raised);
+    - ``marked``: writers whose discovery data says that they filter for the library's filter
+      classes (``cft_action=filters;`` in their USER_DATA), which is how a client tells where its
+      feedback is filtered (``filtered_in``) now that their samples carry no filter signature.
 
     An empty dict when the guard is not preloaded.
     """

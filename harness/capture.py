@@ -36,7 +36,7 @@ import struct
 import sys
 import threading
 from collections import Counter
-from typing import Any
+from typing import Any, Iterator, Optional
 
 CATEGORIES = ('feedback data', 'feedback gap/heartbeat', 'status', 'discovery', 'other')
 
@@ -67,22 +67,57 @@ def _writer_ids(payload: bytes) -> list[tuple[int, bytes, bool]]:
     return found
 
 
-def data_sequence_numbers(payload: bytes) -> list[tuple[bytes, int]]:
-    """(writer GUID, sequence number) of each DATA submessage of one RTPS datagram."""
+_PID_SENTINEL, _PID_CONTENT_FILTER_INFO = 0x0001, 0x0055
+
+
+def _samples(payload: bytes) -> Iterator[tuple[int, int, str, bytes, bytes, int]]:
+    """(submessage id, flags, byte order, body, writer GUID, sequence number) of each DATA and
+    DATA_FRAG submessage of one RTPS datagram (the body after the submessage's 4-byte header)."""
     if payload[:4] != b'RTPS':
-        return []
-    prefix, found, offset = payload[8:20], [], 20
+        return
+    prefix, offset = payload[8:20], 20
     while offset + 4 <= len(payload):
         kind, flags = payload[offset], payload[offset + 1]
         order = '<' if flags & 1 else '>'
         length = struct.unpack(order + 'H', payload[offset + 2:offset + 4])[0]
-        if kind == _DATA and offset + 24 <= len(payload):
-            high, low = struct.unpack(order + 'iI', payload[offset + 16:offset + 24])
-            found.append((prefix + payload[offset + 12:offset + 16], (high << 32) | low))
+        body = payload[offset + 4:offset + 4 + length] if length else payload[offset + 4:]
+        if kind in (_DATA, _DATA_FRAG) and len(body) >= 20:
+            high, low = struct.unpack(order + 'iI', body[12:20])
+            yield kind, flags, order, body, prefix + body[8:12], (high << 32) | low
         if length == 0:
             break
         offset += 4 + length
-    return found
+
+
+def data_sequence_numbers(payload: bytes) -> list[tuple[bytes, int]]:
+    """(writer GUID, sequence number) of each DATA submessage of one RTPS datagram."""
+    return [(writer, sequence) for kind, _, _, _, writer, sequence in _samples(payload)
+            if kind == _DATA]
+
+
+def _signatures(body: bytes, order: str) -> Optional[int]:
+    """The number of filter signatures in the inline QoS of one DATA or DATA_FRAG submessage body,
+    or None when it has no ``PID_CONTENT_FILTER_INFO``."""
+    at = 4 + struct.unpack(order + 'H', body[2:4])[0]  # octetsToInlineQos counts from there
+    while at + 4 <= len(body):
+        pid, length = struct.unpack(order + 'HH', body[at:at + 4])
+        if pid == _PID_SENTINEL:
+            return None
+        if pid & 0x3fff == _PID_CONTENT_FILTER_INFO:
+            # filterResult: sequence<long> of bitmaps, then filterSignatures: sequence<long[4]>.
+            bitmaps = struct.unpack(order + 'I', body[at + 4:at + 8])[0]
+            start = at + 8 + 4 * bitmaps
+            return int(struct.unpack(order + 'I', body[start:start + 4])[0])
+        at += 4 + length
+    return None
+
+
+def filter_signatures(payload: bytes) -> list[tuple[bytes, int, Optional[int]]]:
+    """(writer GUID, sequence number, signatures) of each DATA and DATA_FRAG submessage of one RTPS
+    datagram: how many readers' filter signatures (``PID_CONTENT_FILTER_INFO``) its inline QoS
+    carries, None without that parameter."""
+    return [(writer, sequence, _signatures(body, order) if flags & 0x02 else None)  # Q: inline QoS
+            for _, flags, order, body, writer, sequence in _samples(payload)]
 
 
 def classify(payload: bytes, feedback: set[bytes], status: set[bytes]) -> tuple[str, int]:
@@ -162,6 +197,34 @@ def capture(interface: str, feedback: set[bytes], status: set[bytes],
     counts['feedback data'].update(resent_bytes=resent['bytes'], resent_packets=resent['packets'])
     counts['status']['datagrams'] = status_datagrams
     return counts
+
+
+def data_by_port(interface: str, writers: set[bytes], stop: threading.Event,
+                 listening: threading.Event) -> dict[int, dict[int, Optional[int]]]:
+    """The DATA submessages of ``writers`` received on ``interface`` until ``stop`` is set, by UDP
+    destination port (one port per reader's participant): sequence number -> the number of filter
+    signatures it carried (None: no ``PID_CONTENT_FILTER_INFO``; a repair counts once, the last
+    copy). Sets ``listening`` once the socket is bound. Unfragmented IPv4 datagrams only."""
+    sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(3))  # ETH_P_ALL
+    sock.bind((interface, 0))
+    sock.settimeout(0.2)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 * 1024 * 1024)
+    found: dict[int, dict[int, Optional[int]]] = {}
+    listening.set()
+    while not stop.is_set():
+        try:
+            frame, address = sock.recvfrom(65535)
+        except socket.timeout:
+            continue
+        if address[2] == socket.PACKET_OUTGOING or frame[12:14] != b'\x08\x00' or frame[23] != 17:
+            continue
+        header = (frame[14] & 0x0f) * 4
+        port = struct.unpack('!H', frame[14 + header + 2:14 + header + 4])[0]
+        for writer, sequence, signatures in filter_signatures(frame[14 + header + 8:]):
+            if writer in writers:
+                found.setdefault(port, {})[sequence] = signatures
+    sock.close()
+    return found
 
 
 def main() -> None:

@@ -581,7 +581,11 @@ def environment_facts() -> dict[str, Any]:
             'python': platform.python_version(), 'cpus': os.cpu_count(), 'cpu_model': cpu,
             'load_average_at_start': os.getloadavg(), 'versions': versions,
             'fastdds_library': fastdds_library(),
-            'rmw': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp (default)')}
+            'rmw': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp (default)'),
+            # The guard's switches, which the servers inherit (e.g. CFT_GUARD_KEEP_READERS=0).
+            'guard_environment': {
+                k: v for k, v in sorted(os.environ.items())
+                if k.startswith('CFT_GUARD_') or k == 'CFT_ACTION_READER_FILTERS'}}
 
 
 # --- presentation ---------------------------------------------------------------------------------

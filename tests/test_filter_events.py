@@ -2,8 +2,10 @@
 
 Every change of a client's feedback filter is an event at the server's feedback writer, and on an
 unguarded Fast DDS 2.14 server such events can crash it (docs/SAFETY.md). The guard sees each one
-(``process_reader_filter_info``) and counts the filters of the library's class that it created or
-changed for them, so the server itself can tell how many events a client caused.
+(``process_reader_filter_info``) and counts them: a reader of the library's class that it keeps
+itself once per event (``kept``, docs/INTERNALS.md section 18), or a filter of the class that it
+created or changed for Fast DDS's collection (``changes``, with ``CFT_GUARD_KEEP_READERS=0``), so
+the server itself can tell how many events a client caused.
 """
 
 from __future__ import annotations
@@ -19,7 +21,8 @@ from tests.support import action_server, result_of, round_trip, send, server_evi
 
 
 def compiled(child) -> int:
-    return child.request_json('stats', 'STATS')['guard_filter_class']['changes']
+    stats = child.request_json('stats', 'STATS')
+    return stats['guard_filter']['kept'] + stats['guard_filter_class']['changes']
 
 
 def test_client_mode_changes_its_filter_only_for_an_untagged_caller_uuid(ros):

@@ -106,6 +106,7 @@ def expected_keys(expression: str, params: list[str], published: list[tuple[int,
 
 LAYOUT_PROBE = r'''
 #include <fastdds/rtps/builtin/data/ReaderProxyData.h>
+#include <fastdds/rtps/common/CacheChange.h>
 #include <fastdds/rtps/common/SerializedPayload.h>
 #include <cstddef>
 #include <cstdio>
@@ -134,14 +135,17 @@ int main() {
     memcpy(&word, reinterpret_cast<const char*>(&s) + at, sizeof word);
     if (word == 3 && at >= 4) length_at = at;
   }
-  printf("%ld %ld %zu %zu %zu %zu %ld %zu %ld %zu %zu %ld %ld %ld\n",
+  CacheChange_t change;  // public members: the offsets measured on an object
+  printf("%ld %ld %zu %zu %zu %zu %ld %zu %ld %zu %zu %ld %ld %ld %ld %zu %ld %zu\n",
          diff(&rpd->typeName(), rpd), diff(&rpd->content_filter(), rpd),
          offsetof(ContentFilterProperty, related_topic_name),
          offsetof(ContentFilterProperty, filter_class_name),
          offsetof(ContentFilterProperty, filter_expression),
          offsetof(ContentFilterProperty, expression_parameters), vector_at, sizeof(string_255),
          length_at, offsetof(SerializedPayload_t, length), offsetof(SerializedPayload_t, data),
-         diff(&rpd->guid(), rpd), diff(&rpd->key(), rpd), diff(&rpd->topicName(), rpd));
+         diff(&rpd->guid(), rpd), diff(&rpd->key(), rpd), diff(&rpd->topicName(), rpd),
+         diff(&change.kind, &change), sizeof change.kind, diff(&change.serializedPayload, &change),
+         offsetof(SerializedPayload_t, max_size));
   return 0;
 }
 '''
@@ -151,7 +155,7 @@ int main() {
 LAYOUT_NAMES = ('RPD_TYPE_NAME', 'RPD_CONTENT_FILTER', 'CFP_RELATED_TOPIC', 'CFP_CLASS_NAME',
                 'CFP_EXPRESSION', 'CFP_PARAMETERS', 'RLV_VECTOR', 'STRING255_SIZE',
                 'STRING255_LENGTH', 'PAYLOAD_LENGTH', 'PAYLOAD_DATA', 'RPD_GUID', 'RPD_KEY',
-                'RPD_TOPIC_NAME')
+                'RPD_TOPIC_NAME', 'CC_KIND', 'CC_KIND_SIZE', 'CC_PAYLOAD', 'PAYLOAD_MAX_SIZE')
 
 
 def guard_library() -> ctypes.CDLL:

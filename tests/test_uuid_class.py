@@ -121,8 +121,9 @@ def own_and_foreign_goal(ros, child, action):
 @pytest.mark.parametrize('guarded', [False, True], ids=['unguarded', 'guarded'])
 def test_where_other_goals_feedback_is_dropped(ros, guarded):
     """An unguarded server sends everything: the client's reader judges every sample itself and
-    only its own goals' feedback reaches rcl. A guarded one filters in its writer, and marks what
-    it sends, so the reader judges nothing."""
+    only its own goals' feedback reaches rcl. A guarded one filters in its writer, and its
+    samples carry no filter signature: the reader judges its own goals' feedback only, and knows
+    where the rest was dropped from the writer's discovery data."""
     action = '/' + unique_name('fib')
     child = start_server(action, guarded=guarded)
     try:
@@ -131,9 +132,13 @@ def test_where_other_goals_feedback_is_dropped(ros, guarded):
         assert state.active and state.feedback_taken - before.feedback_taken == ORDER, state
         assert state.feedback_dropped == before.feedback_dropped, state
         if guarded:
-            assert state.filtered_in == 'writer' and ours._reader.reader_verdicts == 0, state
+            assert state.filtered_in == 'writer', state
+            assert ours._reader.reader_verdicts == ORDER, state
             counts = child.request_json('stats', 'STATS')['guard_filter_class']
-            assert counts['filters'] >= 1 and counts['verdicts'] >= 2 * ORDER, counts
+            # The writer keeps the reader in the guard's table: no filter of the class there.
+            assert counts['filters'] == 0 and counts['verdicts'] == 0, counts
+            kept = child.request_json('stats', 'STATS')['guard_filter']
+            assert kept['kept'] >= 1 and kept['relevance_verdicts'] >= 2 * ORDER, kept
         else:
             # Both goals' feedback came over the wire, and the reader judged every sample.
             assert state.filtered_in == 'reader', state

@@ -1,7 +1,8 @@
 """A client process for the ActionClient tests: sends goals on command and reports what arrived.
 
-Usage: ``python -m tests.helpers.fib_client ACTION MODE GOALS ORDER``
-MODE is a cft_action feedback_filter mode, or ``rclpy``. Before ``READY`` the client proves its
+Usage: ``python -m tests.helpers.fib_client ACTION MODE GOALS ORDER [WRITER_FILTERING]``
+MODE is a cft_action feedback_filter mode, or ``rclpy``; WRITER_FILTERING is the client's
+``writer_filtering`` (default ``guarded``). Before ``READY`` the client proves its
 goal service and its feedback path (:func:`tests.support.prove_feedback_path`): wait_for_server
 only sees the server in the graph, and a server that matched the client's feedback reader late
 loses a goal's first feedback for any client. Then the line ``go`` sends GOALS goals of ORDER
@@ -34,6 +35,7 @@ DEEP_QOS = {'goal_service_qos_profile': DEEP, 'result_service_qos_profile': DEEP
 
 def main() -> None:
     action, mode, goals, order = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+    writer_filtering = sys.argv[5] if len(sys.argv) > 5 else 'guarded'
     rclpy.init()
     node = Node(f'cft_test_client_{uuid.uuid4().hex[:8]}')
     if mode == 'rclpy':
@@ -41,7 +43,8 @@ def main() -> None:
         client = RclpyActionClient(node, Fibonacci, action, **DEEP_QOS)
         client.new_goal_uuid = lambda: UUID(uuid=list(uuid.uuid4().bytes))
     else:
-        client = ActionClient(node, Fibonacci, action, feedback_filter=mode, **DEEP_QOS)
+        client = ActionClient(node, Fibonacci, action, feedback_filter=mode,
+                              writer_filtering=writer_filtering, **DEEP_QOS)
     if not client.wait_for_server(timeout_sec=20):
         print('NO SERVER', flush=True)
         return
@@ -98,7 +101,8 @@ def main() -> None:
         **({'taken': state.feedback_taken, 'dropped': state.feedback_dropped,
             'proof_taken': proof.feedback_taken if proof else 0,
             'active': state.active, 'reason': state.reason, 'updates': state.updates,
-            'held_goals': state.held_goals, 'arrival_timeouts': state.arrival_timeouts}
+            'held_goals': state.held_goals, 'arrival_timeouts': state.arrival_timeouts,
+            'filtered_in': state.filtered_in, 'reader_verdicts': client._reader.reader_verdicts}
            if state else {}),
     }), flush=True)
     sys.stdin.readline()
