@@ -7,7 +7,8 @@ goal service and its feedback path (:func:`tests.support.prove_feedback_path`): 
 only sees the server in the graph, and a server that matched the client's feedback reader late
 loses a goal's first feedback for any client. Then the line ``go`` sends GOALS goals of ORDER
 feedback messages each, waits for their results, and prints ``RESULT <json>``; its ``taken`` and
-``dropped`` count from the client's creation, ``proof_taken`` is what the proof took of them.
+``dropped`` count from the client's creation, ``proof_taken`` is what the proof took of them;
+``reader_verdicts`` counts from the creation too, ``proof_verdicts`` is the proof's share.
 """
 
 import json
@@ -54,6 +55,7 @@ def main() -> None:
         print(f'NO FEEDBACK {error}', flush=True)
         return
     proof = getattr(client, 'feedback_filter_state', None)
+    proof_verdicts = client._reader.reader_verdicts if proof else 0
     print('READY', flush=True)
     sys.stdin.readline()
 
@@ -99,7 +101,7 @@ def main() -> None:
         'incomplete': repr({i: ks for i, ks in enumerate(received.values())
                             if ks != list(range(order))})[:400],
         **({'taken': state.feedback_taken, 'dropped': state.feedback_dropped,
-            'proof_taken': proof.feedback_taken if proof else 0,
+            'proof_taken': proof.feedback_taken if proof else 0, 'proof_verdicts': proof_verdicts,
             'active': state.active, 'reason': state.reason, 'updates': state.updates,
             'held_goals': state.held_goals, 'arrival_timeouts': state.arrival_timeouts,
             'filtered_in': state.filtered_in, 'reader_verdicts': client._reader.reader_verdicts}
