@@ -17,7 +17,7 @@ name, as the feedback subscription is; where it is not found, status is taken by
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple, Optional
+from typing import Any, Callable, NamedTuple, Optional
 
 from action_msgs.msg import GoalStatus
 from rclpy.serialization import deserialize_message
@@ -54,11 +54,14 @@ class OwnGoalStatus:
 
     :param entities: Where rcl's action client keeps its status subscription.
     :param action_type: The action type, whose ``GoalStatusMessage`` status samples are.
+    :param goal_id_of_request: rclpy's goal id of a goal request's sequence number, or None.
     :param logger: For the one warning when status cannot be trimmed.
     """
 
-    def __init__(self, entities: ActionEntities, action_type: Any, logger: PromptLogger) -> None:
+    def __init__(self, entities: ActionEntities, action_type: Any,
+                 goal_id_of_request: Callable[[int], Any], logger: PromptLogger) -> None:
         self._message_type = action_type.Impl.GoalStatusMessage
+        self._goal_id_of_request = goal_id_of_request
         self.subscription, self.reason = entities.status_subscription, entities.status_reason
         self._table: Optional[_rcl.StatusTable] = None
         if self.reason:
@@ -93,10 +96,15 @@ class OwnGoalStatus:
     def take_into(self, data: dict) -> None:
         """Take one status sample into ``data['status']``, as rclpy's ``take_data``: a
         ``GoalStatusArray`` of this client's entries; nothing when no sample came or it listed
-        none that can change one of this client's goal handles."""
+        none that can change one of this client's goal handles. A goal response in ``data`` is
+        executed before the status, and makes a goal handle that the status may already update."""
         if self._table is None or self.subscription is None:
             return
-        cdr, entries = self._table.take(self.subscription)
+        goal = data.get('goal')
+        goal_id = None if goal is None else self._goal_id_of_request(goal[0])
+        responding = None if goal_id is None else bytes(goal_id.uuid)
+        cdr, entries = self._table.take(self.subscription, responding,
+                                        goal is not None and goal_id is None)
         if cdr is not None and entries != 0:
             # entries < 0: the sample was not plain CDR; it is converted whole, as rclpy does.
             data['status'] = deserialize_message(cdr, self._message_type)

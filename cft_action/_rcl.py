@@ -232,7 +232,8 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
         (_reader_lock, None, [_void_p, ctypes.c_char_p, ctypes.c_int], None),
     'cft_status_trim':
         (_reader_lock, ctypes.c_long, [_void_p, _void_p, ctypes.c_size_t, _void_p,
-                                       ctypes.POINTER(ctypes.c_size_t)], None),
+                                       ctypes.POINTER(ctypes.c_size_t), ctypes.c_char_p,
+                                       ctypes.c_int], None),
     'cft_status_table_count': (_reader_lock, ctypes.c_ulong, [_void_p, ctypes.c_int], None),
     # The Python C API, to reach the C functions that rosidl generates for every message type.
     'PyCapsule_GetName': (ctypes.pythonapi, ctypes.c_char_p, [ctypes.py_object], None),
@@ -493,8 +494,12 @@ class StatusTable:
         """The goal's response was executed: its goal handle exists, or it was rejected."""
         _lib.cft_status_table_responded(self._table, bytes(goal_uuid), int(accepted))
 
-    def take(self, subscription_ptr: int) -> tuple[Optional[bytes], int]:
+    def take(self, subscription_ptr: int, responding: Optional[bytes],
+             all_pending: bool) -> tuple[Optional[bytes], int]:
         """Take one status sample from the rcl subscription and trim it.
+
+        :param responding: the UUID of the goal whose response was taken with the sample, if any.
+        :param all_pending: a goal response was taken, and its goal is not known.
 
         :return: ``(cdr, entries)``: a serialized ``GoalStatusArray`` (with its encapsulation
             header) of the ``entries`` that go to Python; ``(the whole sample, -1)`` when it is not
@@ -509,7 +514,7 @@ class StatusTable:
             self._out = ctypes.create_string_buffer(length)
         out_length = ctypes.c_size_t(0)
         entries = _lib.cft_status_trim(self._table, self._message.buffer, length, self._out,
-                                       ctypes.byref(out_length))
+                                       ctypes.byref(out_length), responding, int(all_pending))
         if entries < 0:
             return ctypes.string_at(self._message.buffer, length), -1
         return self._out.raw[:out_length.value], entries

@@ -8,12 +8,14 @@
 // rcl_take_serialized_message gives it) is read natively, and a new GoalStatusArray is written
 // with only the entries that can change one of this client's goal handles:
 //
-// - a goal whose request was sent and whose response has not yet been executed ("pending"): every
-//   entry, since rclpy may create the goal handle in the same execute, before it reads the status;
 // - a goal whose goal handle exists ("accepted"): an entry whose status differs from the last one
 //   delivered, and the first after acceptance. rclpy's update of a handle is idempotent (it sets
 //   the status, and forgets the handle at a terminal one), so an unchanged entry changes nothing.
-//   After a terminal entry the goal is forgotten here too.
+//   After a terminal entry the goal is forgotten here too;
+// - a goal whose request was sent and whose response has not been executed ("pending"): only
+//   when its response was taken with the sample, since rclpy's execute then makes the goal handle
+//   before it reads the status. rclpy takes one goal response per wake, so that is one goal; when
+//   the caller cannot tell which, every pending goal's entry goes.
 //
 // Goals are added by cft_status_table_sending() before their request is written, and moved from
 // pending by cft_status_table_responded(). A mutex serializes them with cft_status_trim(), since
@@ -176,10 +178,12 @@ static void write_u32(uint8_t *p, uint32_t v, bool little) {
 static size_t align4(size_t offset) { return (offset + 3) & ~(size_t)3; }
 
 // Whether the entry (uuid, status) goes to Python; updates the goal's record.
-static bool deliver(struct cft_status_table *t, const uint8_t *uuid, int8_t status) {
+static bool deliver(struct cft_status_table *t, const uint8_t *uuid, int8_t status,
+                    const uint8_t *responding, bool all_pending) {
   struct slot *s = find(t, uuid);
   if (s == NULL) return false;
-  if (s->state == PENDING) return true;
+  if (s->state == PENDING)
+    return all_pending || (responding != NULL && memcmp(responding, uuid, UUID_SIZE) == 0);
   if (s->last == status) return false;
   s->last = status;
   if (is_terminal(status)) erase(t, s);
@@ -188,11 +192,14 @@ static bool deliver(struct cft_status_table *t, const uint8_t *uuid, int8_t stat
 
 // Read the GoalStatusArray `in` (`in_length` bytes, with its encapsulation header) and write into
 // `out` (at least `in_length` bytes) a GoalStatusArray of the same encoding with only the entries
-// that deliver() selects, in their order; *out_length: its bytes. Returns the entries written, or
-// -1 if `in` is not a plain CDR GoalStatusArray (then nothing was changed, and the caller converts
-// the whole sample, as rclpy does).
+// that deliver() selects, in their order; *out_length: its bytes. `responding`: the UUID of the
+// goal whose response was taken with the sample, or NULL; `all_pending`: a response was taken but
+// its goal is not known. Returns the entries written, or -1 if `in` is not a plain CDR
+// GoalStatusArray (then nothing was changed, and the caller converts the whole sample, as rclpy
+// does).
 EXPORT long cft_status_trim(struct cft_status_table *t, const uint8_t *in, size_t in_length,
-                            uint8_t *out, size_t *out_length) {
+                            uint8_t *out, size_t *out_length, const uint8_t *responding,
+                            int all_pending) {
   if (in_length < 8 || in[0] != 0 || in[1] > 1) return -1;
   bool little = in[1] == 1;
   const uint8_t *body = in + 4;
@@ -216,7 +223,7 @@ EXPORT long cft_status_trim(struct cft_status_table *t, const uint8_t *in, size_
     size_t stamp = align4(pos + UUID_SIZE);
     int8_t status = (int8_t)body[stamp + 8];
     pos = stamp + 9;
-    if (!deliver(t, uuid, status)) continue;
+    if (!deliver(t, uuid, status, responding, all_pending)) continue;
     memcpy(out_body + at, uuid, UUID_SIZE);
     size_t out_stamp = align4(at + UUID_SIZE);
     memset(out_body + at + UUID_SIZE, 0, out_stamp - (at + UUID_SIZE));

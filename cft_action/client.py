@@ -212,7 +212,8 @@ class ActionClient(CompatActionClient):
         self._entities = ActionEntities(self._cft_client_handle.pointer,
                                         self._resolved_action_name, self._cft_action_type,
                                         self._cft_logger)
-        self._status = OwnGoalStatus(self._entities, self._cft_action_type, self._cft_logger)
+        self._status = OwnGoalStatus(self._entities, self._cft_action_type,
+                                     self._cft_goal_id_of_goal_request, self._cft_logger)
         self._cft_goal_sending = self._status.sending
         feedback_topic = f'{self._resolved_action_name}/_action/feedback'
         self._feedback_writers = RemotePublishers(node, feedback_topic, [feedback_topic])

@@ -48,15 +48,18 @@ class Table:
     def responded(self, goal_uuid: bytes, accepted: bool) -> None:
         _rcl._lib.cft_status_table_responded(self.table, goal_uuid, int(accepted))
 
-    def trim(self, sample: bytes) -> tuple[int, bytes]:
+    def trim(self, sample: bytes, responding: bytes | None = None,
+             all_pending: bool = True) -> tuple[int, bytes]:
         out = ctypes.create_string_buffer(max(1, len(sample)))
         length = ctypes.c_size_t(0)
         entries = _rcl._lib.cft_status_trim(self.table, sample, len(sample), out,
-                                            ctypes.byref(length))
+                                            ctypes.byref(length), responding, int(all_pending))
         return entries, out.raw[:length.value]
 
-    def delivered(self, entries: list[GoalStatus]) -> list[GoalStatus]:
-        count, cdr = self.trim(serialize_message(GoalStatusArray(status_list=entries)))
+    def delivered(self, entries: list[GoalStatus], responding: bytes | None = None,
+                  all_pending: bool = True) -> list[GoalStatus]:
+        count, cdr = self.trim(serialize_message(GoalStatusArray(status_list=entries)),
+                               responding, all_pending)
         message = deserialize_message(cdr, GoalStatusArray)
         assert len(message.status_list) == count
         return list(message.status_list)
@@ -118,16 +121,19 @@ def test_a_sample_that_is_not_plain_cdr_is_refused_whole():
 
 
 def test_an_accepted_goal_gets_its_first_entry_and_each_change_once():
-    """Pending (request sent, response not executed): every entry, since rclpy may make the handle
-    in the same execute. Accepted: the first entry, then only changes; after a terminal one, none.
-    Rejected: none. Others' goals: never."""
+    """Pending (request sent, response not executed): only with its own response, which rclpy's
+    execute turns into a handle before it reads the status, or with a response of an unknown goal.
+    Accepted: the first entry, then only changes; after a terminal one, none. Rejected: none.
+    Others' goals: never."""
     table = Table()
     mine, rejected, other = os.urandom(16), os.urandom(16), os.urandom(16)
     table.sending(mine)
     table.sending(rejected)
     executing = [entry(mine, GoalStatus.STATUS_EXECUTING), entry(other, 1),
                  entry(rejected, GoalStatus.STATUS_EXECUTING)]
-    assert len(table.delivered(executing)) == 2
+    assert table.delivered(executing, all_pending=False) == []
+    assert table.delivered(executing, mine, all_pending=False) == [executing[0]]
+    assert table.delivered(executing, other, all_pending=False) == []
     assert len(table.delivered(executing)) == 2
     table.responded(mine, True)
     table.responded(rejected, False)
