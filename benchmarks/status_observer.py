@@ -11,8 +11,8 @@ observer client process per configuration (:mod:`harness.client`: ``rclpy`` is p
 :class:`rclpy.action.ActionClient`, ``client`` and ``goals`` are :class:`cft_action.ActionClient`
 in that mode), each sending one goal, and ``--plain-clients`` plain client processes sending
 ``--goals`` goals each, all at ``go``. The observers run at the same time, so they receive the
-same status samples: their CPU (user + system, from ``go`` until every goal finished and no
-client's counters moved for 1.5 s) is compared within the round, as a ratio to the plain
+same status samples: their CPU (user + system, from ``go`` until the server has accepted and
+finished every goal and no client's counters moved for 1.5 s) is compared within the round, as a ratio to the plain
 observer's. Each observer also reports the status samples and goal entries that reached Python
 (``take_data``'s ``status``), and the library's ``goal_status_state``: the entries the samples
 listed, and those it converted.
@@ -68,6 +68,27 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     return args
 
 
+def wait_for_goals(server: Proc, accepted: int, go: float) -> float:
+    """Wait until the server accepted ``accepted`` goals in all and runs none; seconds since go.
+
+    The server's counters, not the clients' goal handles: a plain handle whose goal response is
+    taken after its goal's last status sample stays without status until a later sample.
+    """
+    shown = go
+    while True:
+        stats = server.request_json('stats', 'STATS')
+        now = time.monotonic()
+        if stats['accepted'] >= accepted and stats['active'] == 0:
+            return now - go
+        if now - go > GOALS_TIMEOUT_S:
+            raise TimeoutError(f'goals not done within {GOALS_TIMEOUT_S:.0f} s: {stats}')
+        if now - shown >= 10:
+            shown = now
+            say(f'    {now - go:.0f} s: {stats["accepted"]}/{accepted} accepted, '
+                f'{stats["active"]} active')
+        time.sleep(0.5)
+
+
 def run_round(args: argparse.Namespace, server_kind: str, domain: int) -> dict[str, Any]:
     """One server, the observers and the plain clients; every process stopped however it ends."""
     env = plain_env(domain)
@@ -87,16 +108,12 @@ def run_round(args: argparse.Namespace, server_kind: str, domain: int) -> dict[s
         procs = [*observers.values(), *plain]
         for proc in procs:
             proc.expect('READY', 120)
+        base = server.request_json('stats', 'STATS')['accepted']
         go = time.monotonic()
         for proc in procs:
             proc.send('go')
-        total = args.plain_clients * args.goals + len(observers)
-        deadline = go + GOALS_TIMEOUT_S
-        while sum(p.request_json('progress', 'PROGRESS')['goals_done'] for p in procs) < total:
-            if time.monotonic() > deadline:
-                raise TimeoutError(f'goals not done within {GOALS_TIMEOUT_S:.0f} s')
-            time.sleep(0.5)
-        goals_s = time.monotonic() - go
+        goals_s = wait_for_goals(server, base + args.plain_clients * args.goals + len(observers),
+                                 go)
         load.wait_for_quiet(procs, go, 0.0, GOALS_TIMEOUT_S, say)
         reports = {config: proc.request_json('report', 'RESULT', 60)
                    for config, proc in observers.items()}

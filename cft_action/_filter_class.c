@@ -8,8 +8,7 @@
 // tests/test_uuid_class.py checks this against the installed headers. ReturnCode_t is a trivially
 // copyable class of one uint32_t, returned in eax; references are pointers.
 //
-// One factory per class; a class is a grammar: how an expression compiles to a program (one
-// malloc'd block, or NULL outside the grammar), and a program's verdict on a serialized sample.
+// One factory per class; a class is a grammar (struct cft_grammar).
 #define _GNU_SOURCE
 #include <pthread.h>
 #include <stdint.h>
@@ -24,11 +23,6 @@
 #define RETCODE_UNSUPPORTED 2u
 #define RETCODE_BAD_PARAMETER 3u
 #define RETCODE_OUT_OF_RESOURCES 5u
-
-struct grammar {
-  void *(*compile)(const char *expression);
-  bool (*matches)(const void *program, const void *payload);  // payload: a SerializedPayload_t *
-};
 
 // A sample that is not a plain CDR FeedbackMessage is passed on: the client's own UUID check,
 // rclpy's, then drops it if it is foreign, as it would for a plain client.
@@ -49,8 +43,8 @@ static bool node_matches(const void *program, const void *payload) {
 
 static void *node_compile(const char *expression) { return cft_node_compile(expression); }
 
-static const struct grammar uuid_grammar = {uuid_compile, uuid_matches};
-static const struct grammar node_grammar = {node_compile, node_matches};
+static const struct cft_grammar uuid_grammar = {uuid_compile, uuid_matches};
+static const struct cft_grammar node_grammar = {node_compile, node_matches};
 
 // Of every filter of this library: verdicts, and filters created or changed (each is a filter
 // event at a writer or a reader of this process).
@@ -60,7 +54,7 @@ static const struct cft_filter_class_owner *owner;
 
 struct filter {
   const void *const *vtable;
-  const struct grammar *grammar;
+  const struct cft_grammar *grammar;
   pthread_rwlock_t lock;  // the program may be replaced while a receive thread evaluates
   void *program;
   unsigned long verdicts;
@@ -83,7 +77,7 @@ static const void *const filter_vtable[] = {(const void *)filter_evaluate};
 
 struct factory {
   const void *const *vtable;
-  const struct grammar *grammar;
+  const struct cft_grammar *grammar;
 };
 
 // filter_parameters is not read: these classes take no parameters.
@@ -137,6 +131,7 @@ static const void *const factory_vtable[] = {(const void *)factory_create,
                                             (const void *)factory_delete};
 static const struct factory uuid_factory = {factory_vtable, &uuid_grammar};
 static const struct factory node_factory = {factory_vtable, &node_grammar};
+static struct factory own_factory = {factory_vtable, NULL};  // the owner's own class
 
 static const struct {
   const char *name;
@@ -156,9 +151,13 @@ const char *cft_filter_class_name(const char *class_name) {
 
 void *cft_filter_factory_for(const char *class_name, const struct cft_filter_class_owner *by) {
   int i = class_index(class_name);
-  if (i < 0) return NULL;
+  bool own = i < 0 && class_name != NULL && by->own_class != NULL &&
+             strcmp(class_name, by->own_class) == 0;
+  if (i < 0 && !own) return NULL;
   __atomic_store_n(&owner, by, __ATOMIC_RELEASE);
-  return (void *)classes[i].factory;
+  if (!own) return (void *)classes[i].factory;
+  __atomic_store_n(&own_factory.grammar, by->own_grammar, __ATOMIC_RELEASE);
+  return &own_factory;
 }
 
 unsigned long cft_filter_verdicts(const void *filter) {

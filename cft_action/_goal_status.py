@@ -25,6 +25,7 @@ from rclpy.serialization import deserialize_message
 from cft_action import _rcl
 from cft_action._action_entities import ActionEntities
 from cft_action._rclpy_compat import PromptLogger
+from cft_action.errors import ContentFilterError
 
 __all__ = ['GoalStatusState', 'OwnGoalStatus']
 
@@ -37,6 +38,8 @@ class GoalStatusState(NamedTuple):
 
     :ivar active: whether status samples are trimmed; when not, rclpy converts each whole.
     :ivar reason: why not; empty when active.
+    :ivar filtered: whether the status reader also drops, before they wake the executor, the
+        samples that list none of this client's goals (its filter could not be set: see the log).
     :ivar samples: status samples taken and trimmed.
     :ivar entries: goal entries those samples listed.
     :ivar delivered: entries converted to Python and given to rclpy's ``execute``.
@@ -44,6 +47,7 @@ class GoalStatusState(NamedTuple):
 
     active: bool
     reason: str
+    filtered: bool = False
     samples: int = 0
     entries: int = 0
     delivered: int = 0
@@ -64,6 +68,8 @@ class OwnGoalStatus:
         self._goal_id_of_request = goal_id_of_request
         self.subscription, self.reason = entities.status_subscription, entities.status_reason
         self._table: Optional[_rcl.StatusTable] = None
+        self._filtered = False
+        self._logger = logger
         if self.reason:
             logger.warning('status is taken as by rclpy, every goal of the server converted to '
                            f'Python: {self.reason}')
@@ -81,7 +87,25 @@ class OwnGoalStatus:
         if self._table is None:
             return GoalStatusState(False, self.reason)
         samples, entries, delivered, _ = self._table.counts()
-        return GoalStatusState(True, '', samples, entries, delivered)
+        return GoalStatusState(True, '', self._filtered, samples, entries, delivered)
+
+    def filter_reader(self) -> None:
+        """Make the status reader drop samples that list none of this client's goals.
+
+        rmw_fastrtps recreates the DataReader for its first filter (docs/INTERNALS.md section 4),
+        so this must run before any executor waits on the subscription. No writer knows the class
+        (section 19): the server sends every sample, and this process's reader judges it.
+        """
+        if self._table is None or self.subscription is None:
+            return
+        try:
+            _rcl.set_content_filter(self.subscription, self._table.filter_expression,
+                                    filter_class=_rcl.STATUS_FILTER_CLASS)
+        except ContentFilterError as error:
+            self._logger.info('every status sample wakes the executor, which then drops those '
+                              f'that list none of this client\'s goals: {error}')
+            return
+        self._filtered = True
 
     def sending(self, goal_uuid: bytes) -> None:
         """A goal request is about to be sent: its status entries go to rclpy from now on."""
@@ -93,12 +117,12 @@ class OwnGoalStatus:
         if self._table is not None:
             self._table.responded(goal_uuid, accepted)
 
-    def take_into(self, data: dict) -> None:
-        """Take one status sample into ``data['status']``, as rclpy's ``take_data``: a
-        ``GoalStatusArray`` of this client's entries; nothing when no sample came or it listed
+    def take_into(self, data: dict, ready: bool) -> None:
+        """If ``ready``, take one status sample into ``data['status']``, as rclpy's ``take_data``:
+        a ``GoalStatusArray`` of this client's entries; nothing when no sample came or it listed
         none that can change one of this client's goal handles. A goal response in ``data`` is
         executed before the status, and makes a goal handle that the status may already update."""
-        if self._table is None or self.subscription is None:
+        if not ready or self._table is None or self.subscription is None:
             return
         goal = data.get('goal')
         goal_id = None if goal is None else self._goal_id_of_request(goal[0])

@@ -235,6 +235,7 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
                                        ctypes.POINTER(ctypes.c_size_t), ctypes.c_char_p,
                                        ctypes.c_int], None),
     'cft_status_table_count': (_reader_lock, ctypes.c_ulong, [_void_p, ctypes.c_int], None),
+    'cft_status_table_number': (_reader_lock, ctypes.c_ulong, [_void_p], None),
     # The Python C API, to reach the C functions that rosidl generates for every message type.
     'PyCapsule_GetName': (ctypes.pythonapi, ctypes.c_char_p, [ctypes.py_object], None),
     'PyCapsule_GetPointer':
@@ -320,9 +321,11 @@ def set_content_filter(subscription_ptr: int, expression: str,
 
 
 #: The library's own filter classes (cft_action/_filter_class.h): goal_id.uuid of action feedback,
-#: and the node of a parameter event.
+#: and the node of a parameter event; and the status reader's (cft_action/_status_trim.h), which
+#: only this process's readers know.
 UUID_FILTER_CLASS = 'CFT_ACTION_UUID'
 NODE_FILTER_CLASS = 'CFT_ACTION_NODE'
+STATUS_FILTER_CLASS = 'CFT_ACTION_STATUS'
 
 
 def filter_class_status() -> str:
@@ -484,6 +487,12 @@ class StatusTable:
         _lib.rcutils_uint8_array_init(ctypes.byref(self._message), self.INITIAL_CAPACITY,
                                       ctypes.byref(allocator))
         self._out = ctypes.create_string_buffer(self.INITIAL_CAPACITY)
+
+    @property
+    def filter_expression(self) -> str:
+        """The expression of :data:`STATUS_FILTER_CLASS` that names this table, for the status
+        subscription: its reader then drops samples that list none of the table's goals."""
+        return f'cft_status_table = {_lib.cft_status_table_number(self._table)}'
 
     def sending(self, goal_uuid: bytes) -> None:
         """A goal's request is about to be sent: its status entries go to Python from now on."""

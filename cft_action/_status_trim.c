@@ -21,6 +21,13 @@
 // pending by cft_status_table_responded(). A mutex serializes them with cft_status_trim(), since
 // goals may be sent from any thread while the executor takes status.
 //
+// The status reader itself can drop a sample that lists none of the table's goals, in its receive
+// thread, so that such a sample never wakes the executor: the filter class CFT_STATUS_CLASS
+// (_status_trim.h), whose expression names the table by a number (never an address: the
+// expression travels to the server by discovery). The trim would deliver nothing from such a
+// sample, since it delivers only the table's goals, and a goal is in the table before the server
+// can list it (its request is sent after cft_status_table_sending).
+//
 // The CDR (classic, XCDR1, as rmw_fastrtps writes it): a 4-byte encapsulation header (0x00 0x00
 // big endian, 0x00 0x01 little endian, then two option bytes), then, aligned from the body's
 // start: uint32 count; per GoalStatus: uint8 uuid[16], int32 sec and uint32 nanosec
@@ -29,8 +36,12 @@
 #include <pthread.h>
 #include <stdbool.h>
 #include <stdint.h>
+#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+
+#include "_cdr.h"
+#include "_status_trim.h"
 
 #define EXPORT __attribute__((visibility("default")))
 
@@ -111,6 +122,12 @@ static void erase(struct cft_status_table *t, struct slot *s) {
   t->count--;
 }
 
+// The tables by number (index + 1), for the reader filters; a number is never reused, and a freed
+// table leaves NULL, so that a filter that outlives its table passes every sample.
+static pthread_mutex_t registry_lock = PTHREAD_MUTEX_INITIALIZER;
+static struct cft_status_table **registry;
+static size_t registry_size, registry_capacity;
+
 EXPORT struct cft_status_table *cft_status_table_new(void) {
   struct cft_status_table *t = calloc(1, sizeof *t);
   if (t == NULL) return NULL;
@@ -121,11 +138,33 @@ EXPORT struct cft_status_table *cft_status_table_new(void) {
     return NULL;
   }
   pthread_mutex_init(&t->lock, NULL);
+  pthread_mutex_lock(&registry_lock);
+  if (registry_size == registry_capacity) {
+    size_t capacity = registry_capacity ? 2 * registry_capacity : 16;
+    struct cft_status_table **grown = realloc(registry, capacity * sizeof *grown);
+    if (grown != NULL) registry = grown, registry_capacity = capacity;
+  }
+  if (registry_size < registry_capacity) registry[registry_size++] = t;
+  pthread_mutex_unlock(&registry_lock);
   return t;
+}
+
+// The table's number for the filter expression `cft_status_table = <number>`; 0 if it has none.
+EXPORT unsigned long cft_status_table_number(const struct cft_status_table *t) {
+  unsigned long number = 0;
+  pthread_mutex_lock(&registry_lock);
+  for (size_t i = 0; i < registry_size && number == 0; i++)
+    if (registry[i] == t) number = i + 1;
+  pthread_mutex_unlock(&registry_lock);
+  return number;
 }
 
 EXPORT void cft_status_table_free(struct cft_status_table *t) {
   if (t == NULL) return;
+  pthread_mutex_lock(&registry_lock);
+  for (size_t i = 0; i < registry_size; i++)
+    if (registry[i] == t) registry[i] = NULL;
+  pthread_mutex_unlock(&registry_lock);
   pthread_mutex_destroy(&t->lock);
   free(t->slots);
   free(t);
@@ -240,6 +279,56 @@ EXPORT long cft_status_trim(struct cft_status_table *t, const uint8_t *in, size_
   *out_length = 4 + at;
   return written;
 }
+
+// --- the reader's filter class --------------------------------------------------------------------
+
+struct status_program {
+  unsigned long number;
+};
+
+static void *status_compile(const char *expression) {
+  unsigned long number;
+  int end = 0;
+  if (expression == NULL || sscanf(expression, " cft_status_table = %lu %n", &number, &end) != 1 ||
+      expression[end] != '\0' || number == 0)
+    return NULL;
+  struct status_program *program = malloc(sizeof *program);
+  if (program != NULL) program->number = number;
+  return program;
+}
+
+// Whether the sample lists a goal of the table. A sample that cannot be read, or whose table is
+// gone, passes: the trim then decides, or rclpy.
+static bool status_matches(const void *program, const void *payload) {
+  uint32_t length;
+  bool little;
+  const uint8_t *body = cft_cdr_body(payload, &length, &little);
+  if (body == NULL || length < 4) return true;
+  uint32_t count = read_u32(body, little);
+  size_t number = ((const struct status_program *)program)->number;
+  bool listed = false;
+  pthread_mutex_lock(&registry_lock);
+  struct cft_status_table *t = number <= registry_size ? registry[number - 1] : NULL;
+  if (t == NULL) {
+    listed = true;
+  } else {
+    pthread_mutex_lock(&t->lock);
+    size_t pos = 4;
+    for (uint32_t i = 0; i < count && !listed; i++) {
+      if (align4(pos + UUID_SIZE) + 9 > length) {
+        listed = true;  // malformed: pass it on
+        break;
+      }
+      listed = find(t, body + pos) != NULL;
+      pos = align4(pos + UUID_SIZE) + 9;
+    }
+    pthread_mutex_unlock(&t->lock);
+  }
+  pthread_mutex_unlock(&registry_lock);
+  return listed;
+}
+
+const struct cft_grammar cft_status_grammar = {status_compile, status_matches};
 
 // Counters: 0 samples read, 1 entries in them, 2 entries delivered, 3 goals in the table.
 EXPORT unsigned long cft_status_table_count(struct cft_status_table *t, int which) {

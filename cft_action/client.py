@@ -194,6 +194,7 @@ class ActionClient(CompatActionClient):
         # while an executor waits on it, nor after a goal was sent, or queued feedback would be
         # lost: so the filter goes in here, after rclpy created the rcl action client.
         self._assemble()
+        self._status.filter_reader()
         self._filter.install(self._cft_client_handle, self._entities.feedback_subscription,
                              f'{self._resolved_action_name}/_action/feedback',
                              self._entities.feedback_reason,
@@ -409,8 +410,7 @@ class ActionClient(CompatActionClient):
             if self._finished_goals.dropped(bytes(feedback.goal_id.uuid), stamp):
                 self._feedback_dropped += 1
                 del data['feedback']
-        if status_ready:
-            self._status.take_into(data)
+        self._status.take_into(data, status_ready)
         return data
 
     async def execute(self, taken_data: dict) -> None:

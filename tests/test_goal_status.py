@@ -320,3 +320,34 @@ def test_every_goal_handle_sees_what_plain_rclpy_gives(ros, mode, guarded):
         if others is not None:
             others.stop()
         server.stop()
+
+
+@pytest.mark.parametrize('guarded', [False, True], ids=['unguarded', 'guarded'])
+def test_an_observer_without_live_goals_is_not_woken_by_others_status(ros, guarded):
+    """Once its own goals have ended, the client's status reader drops every sample that lists
+    none of its goals, guarded or not (no writer knows the status class): others' 60 goals make no
+    status sample reach the trim, while a plain client next to it takes them."""
+    action = '/' + unique_name('fib')
+    server = start_server(action, guarded=guarded, period=0.02)
+    others = None
+    try:
+        client = ActionClient(ros.node, Fibonacci, action)
+        assert client.goal_status_state.filtered
+        assert client.wait_for_server(timeout_sec=20)
+        assert round_trip(ros, client), 'the server never answered a goal'
+        table = client._status._table
+        assert ros.spin_until(lambda: table.counts()[3] == 0, 20)  # the probe goal ended
+        before = client.goal_status_state
+        others = helper_process('harness.client', [action, 'rclpy', 60, 2, 1000], timeout=60)
+        others.send('go')
+        assert ros.spin_until(lambda: server_done(server, 60 + 2), 60), server.tail()
+        ros.spin_for(0.5)
+        report = others.request_json('report', 'RESULT')
+        assert report['status'] > 0  # the plain client took status samples
+        after = client.goal_status_state
+        assert (after.samples, after.delivered) == (before.samples, before.delivered)
+        assert server.poll() is None, server.tail()
+    finally:
+        if others is not None:
+            others.stop()
+        server.stop()
