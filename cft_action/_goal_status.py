@@ -39,7 +39,8 @@ class GoalStatusState(NamedTuple):
     :ivar active: whether status samples are trimmed; when not, rclpy converts each whole.
     :ivar reason: why not; empty when active.
     :ivar filtered: whether the status reader also drops, before they wake the executor, the
-        samples that list none of this client's goals (its filter could not be set: see the log).
+        samples that can change none of this client's goal handles (when not, its filter could
+        not be set: the log says why).
     :ivar samples: status samples taken and trimmed.
     :ivar entries: goal entries those samples listed.
     :ivar delivered: entries converted to Python and given to rclpy's ``execute``.
@@ -90,7 +91,9 @@ class OwnGoalStatus:
         return GoalStatusState(True, '', self._filtered, samples, entries, delivered)
 
     def filter_reader(self) -> None:
-        """Make the status reader drop samples that list none of this client's goals.
+        """Make the status reader drop samples that can change none of this client's goal handles:
+        those that list no goal of this client whose response is pending, nor one whose status
+        differs from the last sample that the reader passed (cft_action/_status_trim.c).
 
         rmw_fastrtps recreates the DataReader for its first filter (docs/INTERNALS.md section 4),
         so this must run before any executor waits on the subscription. No writer knows the class
@@ -102,8 +105,8 @@ class OwnGoalStatus:
             _rcl.set_content_filter(self.subscription, self._table.filter_expression,
                                     filter_class=_rcl.STATUS_FILTER_CLASS)
         except ContentFilterError as error:
-            self._logger.info('every status sample wakes the executor, which then drops those '
-                              f'that list none of this client\'s goals: {error}')
+            self._logger.info('every status sample wakes the executor, which then drops the '
+                              f'entries of other goals: {error}')
             return
         self._filtered = True
 

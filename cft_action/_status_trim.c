@@ -21,11 +21,14 @@
 // pending by cft_status_table_responded(). A mutex serializes them with cft_status_trim(), since
 // goals may be sent from any thread while the executor takes status.
 //
-// The status reader itself can drop a sample that lists none of the table's goals, in its receive
-// thread, so that such a sample never wakes the executor: the filter class CFT_STATUS_CLASS
+// The status reader itself drops, in its receive thread, a sample that can change none of the
+// client's goal handles, so that it never wakes the executor: the filter class CFT_STATUS_CLASS
 // (_status_trim.h), whose expression names the table by a number (never an address: the
-// expression travels to the server by discovery). The trim would deliver nothing from such a
-// sample, since it delivers only the table's goals, and a goal is in the table before the server
+// expression travels to the server by discovery). A sample passes if it lists a pending goal, or
+// an accepted goal with another status than in the last sample that passed. The reader evaluates
+// every sample in order, and its keep-last 1 history is replaced only by samples that pass, so it
+// always holds (or has handed to the executor) a sample with the latest status of every one of
+// the client's goals, as a plain reader's history would. A goal is in the table before the server
 // can list it (its request is sent after cft_status_table_sending).
 //
 // The CDR (classic, XCDR1, as rmw_fastrtps writes it): a 4-byte encapsulation header (0x00 0x00
@@ -58,6 +61,7 @@ struct slot {
   bool used;
   uint8_t state;  // PENDING or ACCEPTED
   int16_t last;   // accepted: the status last delivered, or UNDELIVERED
+  int16_t seen;   // accepted: the status in the last sample the reader's filter passed, or UNDELIVERED
 };
 
 struct cft_status_table {
@@ -183,7 +187,7 @@ EXPORT int cft_status_table_sending(struct cft_status_table *t, const uint8_t *u
     memcpy(s->uuid, uuid, UUID_SIZE);
     s->used = true;
     s->state = PENDING;
-    s->last = UNDELIVERED;
+    s->last = s->seen = UNDELIVERED;
   }
   pthread_mutex_unlock(&t->lock);
   return ret;
@@ -197,7 +201,7 @@ EXPORT void cft_status_table_responded(struct cft_status_table *t, const uint8_t
   if (s != NULL && s->state == PENDING) {
     if (accepted) {
       s->state = ACCEPTED;
-      s->last = UNDELIVERED;
+      s->last = s->seen = UNDELIVERED;
     } else {
       erase(t, s);
     }
@@ -215,6 +219,12 @@ static void write_u32(uint8_t *p, uint32_t v, bool little) {
 }
 
 static size_t align4(size_t offset) { return (offset + 3) & ~(size_t)3; }
+
+// The body offset of the entry after the one at `pos`, and the status of the one at `pos`.
+static size_t next_entry(size_t pos) { return align4(pos + UUID_SIZE) + 9; }
+static int8_t status_at(const uint8_t *body, size_t pos) {
+  return (int8_t)body[align4(pos + UUID_SIZE) + 8];
+}
 
 // Whether the entry (uuid, status) goes to Python; updates the goal's record.
 static bool deliver(struct cft_status_table *t, const uint8_t *uuid, int8_t status,
@@ -297,8 +307,9 @@ static void *status_compile(const char *expression) {
   return program;
 }
 
-// Whether the sample lists a goal of the table. A sample that cannot be read, or whose table is
-// gone, passes: the trim then decides, or rclpy.
+// Whether the sample lists a pending goal of the table, or an accepted one whose status changed
+// since the last sample that passed; if it passes, it is the last one. A sample that cannot be
+// read, or whose table is gone, passes: the trim then decides, or rclpy.
 static bool status_matches(const void *program, const void *payload) {
   uint32_t length;
   bool little;
@@ -306,26 +317,29 @@ static bool status_matches(const void *program, const void *payload) {
   if (body == NULL || length < 4) return true;
   uint32_t count = read_u32(body, little);
   size_t number = ((const struct status_program *)program)->number;
-  bool listed = false;
+  bool passes = false;
   pthread_mutex_lock(&registry_lock);
   struct cft_status_table *t = number <= registry_size ? registry[number - 1] : NULL;
-  if (t == NULL) {
-    listed = true;
+  size_t end = 4;
+  for (uint32_t i = 0; i < count && end <= length; i++) end = next_entry(end);
+  if (t == NULL || end > length) {
+    passes = true;  // no table, or a malformed sample: pass it on
   } else {
     pthread_mutex_lock(&t->lock);
-    size_t pos = 4;
-    for (uint32_t i = 0; i < count && !listed; i++) {
-      if (align4(pos + UUID_SIZE) + 9 > length) {
-        listed = true;  // malformed: pass it on
-        break;
+    for (size_t i = 0, pos = 4; i < count && !passes; i++, pos = next_entry(pos)) {
+      const struct slot *s = find(t, body + pos);
+      passes = s != NULL && (s->state == PENDING || s->seen != status_at(body, pos));
+    }
+    if (passes) {  // the last sample that passed: record its statuses
+      for (size_t i = 0, pos = 4; i < count; i++, pos = next_entry(pos)) {
+        struct slot *s = find(t, body + pos);
+        if (s != NULL && s->state == ACCEPTED) s->seen = status_at(body, pos);
       }
-      listed = find(t, body + pos) != NULL;
-      pos = align4(pos + UUID_SIZE) + 9;
     }
     pthread_mutex_unlock(&t->lock);
   }
   pthread_mutex_unlock(&registry_lock);
-  return listed;
+  return passes;
 }
 
 const struct cft_grammar cft_status_grammar = {status_compile, status_matches};

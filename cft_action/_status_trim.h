@@ -6,9 +6,9 @@
 
 #include "_filter_class.h"
 
-// A client's status reader drops, in its receive thread, every sample that lists none of the
-// goals of the status table that the expression `cft_status_table = <id>` names. Only a client's
-// own readers know the class.
+// A client's status reader drops, in its receive thread, every sample that can change none of the
+// client's goal handles, by the status table that the expression `cft_status_table = <number>`
+// names (_status_trim.c). Only a client's own readers know the class.
 #define CFT_STATUS_CLASS "CFT_ACTION_STATUS"
 
 extern const struct cft_grammar cft_status_grammar;

@@ -324,9 +324,9 @@ def test_every_goal_handle_sees_what_plain_rclpy_gives(ros, mode, guarded):
 
 @pytest.mark.parametrize('guarded', [False, True], ids=['unguarded', 'guarded'])
 def test_an_observer_without_live_goals_is_not_woken_by_others_status(ros, guarded):
-    """Once its own goals have ended, the client's status reader drops every sample that lists
-    none of its goals, guarded or not (no writer knows the status class): others' 60 goals make no
-    status sample reach the trim, while a plain client next to it takes them."""
+    """Once its own goals have ended, the client's status reader drops every sample, since none can
+    change its goal handles, guarded or not (no writer knows the status class): others' 60 goals
+    make no status sample reach the trim, while a plain client next to it takes them."""
     action = '/' + unique_name('fib')
     server = start_server(action, guarded=guarded, period=0.02)
     others = None
