@@ -55,7 +55,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--plain-clients', type=int, default=4)
     parser.add_argument('--goals', type=int, default=128, help='goals per plain client')
     parser.add_argument('--order', type=int, default=2, help='feedback messages per goal')
-    parser.add_argument('--period', type=float, default=0.05, help='feedback period, s')
+    parser.add_argument('--period', type=float, default=0.5, help='feedback period, s')
     parser.add_argument('--configs', type=name_list(load.CONFIG_LABELS), default=['rclpy', 'client'],
                         help='observer configurations, from: ' + ', '.join(load.CONFIG_LABELS))
     parser.add_argument('--servers', default='unguarded,guarded')

@@ -326,7 +326,8 @@ static bool status_matches(const void *program, const void *payload) {
     passes = true;  // no table, or a malformed sample: pass it on
   } else {
     pthread_mutex_lock(&t->lock);
-    for (size_t i = 0, pos = 4; i < count && !passes; i++, pos = next_entry(pos)) {
+    // With no goal in the table (a client whose goals have all ended), nothing is looked up.
+    for (size_t i = 0, pos = 4; i < count && !passes && t->count > 0; i++, pos = next_entry(pos)) {
       const struct slot *s = find(t, body + pos);
       passes = s != NULL && (s->state == PENDING || s->seen != status_at(body, pos));
     }
