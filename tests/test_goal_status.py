@@ -17,7 +17,7 @@ from typing import Any
 import pytest
 from action_msgs.msg import GoalInfo, GoalStatus, GoalStatusArray
 from builtin_interfaces.msg import Time
-from rclpy.qos import QoSProfile, ReliabilityPolicy
+from rclpy.qos import qos_profile_action_status_default, QoSProfile, ReliabilityPolicy
 from rclpy.serialization import deserialize_message, serialize_message
 from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
@@ -255,6 +255,19 @@ class ShadowedClient(ActionClient):
                 sequence.append(handle.status)
 
 
+def plain_status_subscription(ros: Any, action: str) -> list[GoalStatusArray]:
+    """A plain rclpy subscription to the action's status, with the status QoS; the list holds its
+    latest sample."""
+    latest: list[GoalStatusArray] = []
+
+    def keep(message: GoalStatusArray) -> None:
+        latest[:] = [message]
+
+    ros.node.create_subscription(GoalStatusArray, f'{action}/_action/status', keep,
+                                 qos_profile_action_status_default)
+    return latest
+
+
 def server_done(server: Any, accepted: int) -> bool:
     """Whether the server accepted at least ``accepted`` goals and runs none."""
     stats = server.request_json('stats', 'STATS')
@@ -286,9 +299,22 @@ def test_every_goal_handle_sees_what_plain_rclpy_gives(ros, mode, guarded):
                                           (lambda _: None) if k % 2 else None)
                    for k in range(12)]
         futures.append(client.send_goal_async(Fibonacci.Goal(order=-1)))  # rejected
-        futures.append(client.send_goal_async(Fibonacci.Goal(order=400)))  # canceled below
+        futures.append(client.send_goal_async(Fibonacci.Goal(order=1000)))  # canceled below
         assert ros.spin_until(lambda: all(f.done() for f in futures), 30)
         assert not futures[12].result().accepted
+        # No stale status: while others' goals churn, every live handle of this client comes to
+        # hold the status that a plain status subscription's latest sample lists for it (the
+        # reader filter dropped no sample that would have changed it).
+        latest = plain_status_subscription(ros, action)
+        live = [f.result() for f in futures if f.result().accepted]
+
+        def current() -> bool:
+            listed = {bytes(s.goal_info.goal_id.uuid): s.status
+                      for s in (latest[0].status_list if latest else [])}
+            return all(h.status == listed.get(bytes(h.goal_id.uuid), h.status) for h in live) \
+                and listed.get(bytes(futures[13].result().goal_id.uuid)) \
+                == GoalStatus.STATUS_EXECUTING
+        assert ros.spin_until(current, 20), client.goal_status_state
         cancel = futures[13].result().cancel_goal_async()
         assert ros.spin_until(cancel.done, 20)
         accepted = [f.result() for f in futures if f.result().accepted]
