@@ -7,8 +7,9 @@
   classes it shares with the reader (``_filter_class.c``, ``_uuid_program.c``,
   ``_node_program.c``);
 - ``_cftreader``, the reader lock and the reader's filter class (``_reader_lock.c``,
-  ``_reader_class.c``, ``_patch.c`` and the same three), loaded with ctypes by ``cft_action._rcl``
-  into every process that changes a filter.
+  ``_reader_class.c``, ``_patch.c`` and the same three), and the action client's status trim
+  (``_status_trim.c``), loaded with ctypes by ``cft_action._rcl`` into every process that changes
+  a filter or takes an action client's status.
 
 Both read Fast DDS objects at offsets that come from the Fast DDS headers found at build time:
 ``cft_action/_fastdds_layout.cpp`` is compiled to assembly against them, and its offsets become
@@ -147,7 +148,8 @@ setup(
             sources=['cft_action/_reader_lock.c', 'cft_action/_reader_class.c',
                      'cft_action/_writer_marks.c', 'cft_action/_patch.c',
                      'cft_action/_filter_class.c',
-                     'cft_action/_uuid_program.c', 'cft_action/_node_program.c'],
+                     'cft_action/_uuid_program.c', 'cft_action/_node_program.c',
+                     'cft_action/_status_trim.c'],
             libraries=['dl', 'pthread'],
             extra_compile_args=['-O2', '-fvisibility=hidden', '-Wall'],
         ),

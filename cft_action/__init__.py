@@ -18,7 +18,7 @@ from typing import Any, TYPE_CHECKING
 from cft_action.errors import CftActionError, ContentFilterError, InvalidArgumentError
 
 if TYPE_CHECKING:
-    from cft_action.client import ActionClient, FeedbackFilterState
+    from cft_action.client import ActionClient, FeedbackFilterState, GoalStatusState
     from cft_action.parameter_events import ParameterEventFilterState, ParameterEventHandler
     from cft_action.subscription import (ContentFilterOptions, create_filtered_subscription,
                                          get_content_filter, is_content_filter_supported,
@@ -28,6 +28,7 @@ if TYPE_CHECKING:
 _LAZY = {
     'ActionClient': 'client',
     'FeedbackFilterState': 'client',
+    'GoalStatusState': 'client',
     'ParameterEventFilterState': 'parameter_events',
     'ParameterEventHandler': 'parameter_events',
     'ContentFilterOptions': 'subscription',
@@ -40,7 +41,7 @@ _LAZY = {
 
 __all__ = [
     'ActionClient', 'CftActionError', 'ContentFilterError', 'FeedbackFilterState',
-    'InvalidArgumentError', 'ParameterEventFilterState', 'ParameterEventHandler',
+    'GoalStatusState', 'InvalidArgumentError', 'ParameterEventFilterState', 'ParameterEventHandler',
     'ContentFilterOptions', 'create_filtered_subscription', 'get_content_filter',
     'is_content_filter_supported', 'is_filtered', 'set_content_filter',
 ]

@@ -1,10 +1,11 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
-"""The feedback subscription and result client inside rcl's action client, and their takes.
+"""The feedback and status subscriptions and result client inside rcl's action client, and takes.
 
 rcl has no accessor for them, so they are found by layout and checked (docs/INTERNALS.md section
 3). The action client filters the feedback subscription, and takes feedback and result responses
 here rather than through rclpy, whose takes drop the sample info: the source timestamps tell
-whether the server published a feedback message before or after the goal's result.
+whether the server published a feedback message before or after the goal's result. Status is
+taken by :mod:`cft_action._goal_status`.
 """
 
 from __future__ import annotations
@@ -30,6 +31,8 @@ class ActionEntities:
                  logger: PromptLogger) -> None:
         self.feedback_subscription, self.feedback_reason = _rcl.action_feedback_subscription(
             client_pointer, resolved_action_name)
+        self.status_subscription, self.status_reason = _rcl.action_subscription(
+            client_pointer, resolved_action_name, 'status')
         result_client, reason = _rcl.action_result_client(client_pointer, resolved_action_name)
         reason = reason or self.feedback_reason
         # Set only when both were found: feedback and results are then taken here.

@@ -8,8 +8,7 @@
 // tests/test_uuid_class.py checks this against the installed headers. ReturnCode_t is a trivially
 // copyable class of one uint32_t, returned in eax; references are pointers.
 //
-// One factory per class; a class is a grammar: how an expression compiles to a program (one
-// malloc'd block, or NULL outside the grammar), and a program's verdict on a serialized sample.
+// One factory per class; a class is a grammar (struct cft_filter_grammar).
 #define _GNU_SOURCE
 #include <pthread.h>
 #include <stdint.h>
@@ -24,11 +23,6 @@
 #define RETCODE_UNSUPPORTED 2u
 #define RETCODE_BAD_PARAMETER 3u
 #define RETCODE_OUT_OF_RESOURCES 5u
-
-struct cft_filter_grammar {
-  void *(*compile)(const char *expression);
-  bool (*matches)(const void *program, const void *payload);  // payload: a SerializedPayload_t *
-};
 
 // A sample that is not a plain CDR FeedbackMessage is passed on: the client's own UUID check,
 // rclpy's, then drops it if it is foreign, as it would for a plain client.
@@ -137,6 +131,7 @@ static const void *const factory_vtable[] = {(const void *)factory_create,
                                             (const void *)factory_delete};
 static const struct factory uuid_factory = {factory_vtable, &uuid_grammar};
 static const struct factory node_factory = {factory_vtable, &node_grammar};
+static struct factory own_factory = {factory_vtable, NULL};  // the owner's own class
 
 static const struct {
   const char *name;
@@ -156,9 +151,13 @@ const char *cft_filter_class_name(const char *class_name) {
 
 void *cft_filter_factory_for(const char *class_name, const struct cft_filter_class_owner *by) {
   int i = class_index(class_name);
-  if (i < 0) return NULL;
+  bool own = i < 0 && class_name != NULL && by->own_class != NULL &&
+             strcmp(class_name, by->own_class) == 0;
+  if (i < 0 && !own) return NULL;
   __atomic_store_n(&owner, by, __ATOMIC_RELEASE);
-  return (void *)classes[i].factory;
+  if (!own) return (void *)classes[i].factory;
+  __atomic_store_n(&own_factory.grammar, by->own_grammar, __ATOMIC_RELEASE);
+  return &own_factory;
 }
 
 const struct cft_filter_grammar *cft_filter_class_grammar(const char *class_name) {

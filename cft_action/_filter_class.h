@@ -31,18 +31,29 @@
 // no filter signature for these classes (_writer_marks.c reads it).
 #define CFT_WRITER_MARK "cft_action=filters;"
 
+// A class's grammar: how an expression compiles to a program (one malloc'd block, or NULL outside
+// the grammar), and a program's verdict on a serialized sample (a SerializedPayload_t *).
+struct cft_filter_grammar {
+  void *(*compile)(const char *expression);
+  bool (*matches)(const void *program, const void *payload);
+};
+
 // What the library that links this file decides about the filters of its process: whether a
 // factory may create a filter now (the guard creates them for its writers and readers; a client's
 // process only for its own readers, since a writer there would filter unguarded), and what it
-// does with one a factory created (not updated); `filter` is opaque. Given by that library, so
-// that calls go one way: from it into this file.
+// does with one a factory created (not updated); `filter` is opaque. Optionally one class of its
+// own (`own_class`, with `own_grammar`), which only this owner answers: the guard does not know
+// it, so no writer ever filters with it. Given by that library, so that calls go one way: from it
+// into this file.
 struct cft_filter_class_owner {
   bool (*may_create)(void);
   void (*created)(void *filter);
+  const char *own_class;
+  const struct cft_filter_grammar *own_grammar;
 };
 
 // The factory (an object with an IContentFilterFactory vtable) if `class_name` is one of these
-// classes, else NULL. Its filters follow `owner`'s decisions from then on (the same owner on every
+// classes or the owner's own, else NULL. Its filters follow `owner`'s decisions from then on (the same owner on every
 // call).
 void *cft_filter_factory_for(const char *class_name, const struct cft_filter_class_owner *owner);
 

@@ -11,7 +11,8 @@ from typing import Optional
 
 #: The server guard, ``_guard.c`` and ``_guard_filter.c``: ``LD_PRELOAD``-ed into servers.
 GUARD_LIBRARY = '_cftguard'
-#: The reader lock, ``_reader_lock.c``: loaded with ctypes into processes that change filters.
+#: The reader lock, ``_reader_lock.c``, and the status trim, ``_status_trim.c``: loaded with ctypes
+#: into processes that change filters or take an action client's status.
 READER_LOCK_LIBRARY = '_cftreader'
 LIBRARIES = (GUARD_LIBRARY, READER_LOCK_LIBRARY)
 

@@ -1,13 +1,14 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 """The ctypes binding to rcl: the only module that knows C signatures and struct layouts.
 
-Jazzy's rclpy exposes no content-filter API, but ``librcl.so`` exports one; and its action client
+Jazzy's rclpy exposes no content-filter API, but ``librcl.so`` exports one; its action client
 takes feedback and result responses without their sample info, which ``rcl_take`` and
-``rcl_take_response_with_info`` return. Each C symbol is
-declared once, in :data:`_SYMBOLS` below, with its argument and return types. Functions that
-return ``rcl_ret_t`` get an ``errcheck`` that turns a non-OK code into :class:`ContentFilterError`
-carrying rcl's own error string, and resets rcl's error state, so nothing fails silently.
-A missing symbol is an error when this module loads, not a crash later.
+``rcl_take_response_with_info`` return; and it converts every status sample whole to Python, where
+``rcl_take_serialized_message`` gives the bytes for the status trim (``_status_trim.c``). Each C
+symbol is declared once, in :data:`_SYMBOLS` below, with its argument and return types. Functions
+that return ``rcl_ret_t`` get an ``errcheck`` that turns a non-OK code into
+:class:`ContentFilterError` carrying rcl's own error string, and resets rcl's error state, so
+nothing fails silently. A missing symbol is an error when this module loads, not a crash later.
 """
 
 from __future__ import annotations
@@ -84,6 +85,13 @@ class _ServiceInfo(ctypes.Structure):
                 ('request_id', _RequestId)]
 
 
+class _Uint8Array(ctypes.Structure):
+    """``rcutils_uint8_array_t``, which is ``rcl_serialized_message_t``."""
+
+    _fields_ = [('buffer', ctypes.POINTER(ctypes.c_uint8)), ('buffer_length', ctypes.c_size_t),
+                ('buffer_capacity', ctypes.c_size_t), ('allocator', _Allocator)]
+
+
 class _ErrorString(ctypes.Structure):
     _fields_ = [('str', ctypes.c_char * 1024)]  # RCUTILS_ERROR_MESSAGE_MAX_LENGTH
 
@@ -151,6 +159,12 @@ def _take_failed_is_empty(ret: int, func: Any, args: tuple) -> bool:
     return True
 
 
+def _check_rcutils_ret(ret: int, func: Any, args: tuple) -> int:
+    if ret != RCL_RET_OK:
+        raise RCLError(f'{func.__name__} returned {ret}: {take_rcl_error()}')
+    return ret
+
+
 def _map_symbol(library: ctypes.CDLL, name: str, restype: Any, argtypes: Sequence[Any],
                 errcheck: Optional[Callable] = None) -> Any:
     try:
@@ -194,6 +208,15 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'rcl_take_response_with_info':
         (_rcl, _rcl_ret_t, [_void_p, ctypes.POINTER(_ServiceInfo), _void_p],
          _take_failed_is_empty),
+    'rcl_take_serialized_message':
+        (_rcl, _rcl_ret_t, [_void_p, ctypes.POINTER(_Uint8Array), ctypes.POINTER(_MessageInfo),
+                            _void_p], _take_failed_is_empty),
+    'rcutils_get_default_allocator': (_rcutils, _Allocator, [], None),
+    'rcutils_uint8_array_init':
+        (_rcutils, _rcl_ret_t, [ctypes.POINTER(_Uint8Array), ctypes.c_size_t,
+                                ctypes.POINTER(_Allocator)], _check_rcutils_ret),
+    'rcutils_uint8_array_fini':
+        (_rcutils, _rcl_ret_t, [ctypes.POINTER(_Uint8Array)], _check_rcutils_ret),
     'cft_reader_lock_install': (_reader_lock, ctypes.c_int, [], None),
     'cft_reader_lock_error': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_reader_lock_count': (_reader_lock, ctypes.c_ulong, [ctypes.c_int], None),
@@ -205,6 +228,17 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'cft_writer_marks_install': (_reader_lock, ctypes.c_int, [], None),
     'cft_writer_marks_error': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_writer_is_marked': (_reader_lock, ctypes.c_int, [ctypes.c_char_p], None),
+    'cft_status_table_new': (_reader_lock, _void_p, [], None),
+    'cft_status_table_free': (_reader_lock, None, [_void_p], None),
+    'cft_status_table_sending': (_reader_lock, ctypes.c_int, [_void_p, ctypes.c_char_p], None),
+    'cft_status_table_responded':
+        (_reader_lock, None, [_void_p, ctypes.c_char_p, ctypes.c_int], None),
+    'cft_status_trim':
+        (_reader_lock, ctypes.c_long, [_void_p, _void_p, ctypes.c_size_t, _void_p,
+                                       ctypes.POINTER(ctypes.c_size_t), ctypes.c_char_p,
+                                       ctypes.c_int], None),
+    'cft_status_table_count': (_reader_lock, ctypes.c_ulong, [_void_p, ctypes.c_int], None),
+    'cft_status_table_number': (_reader_lock, ctypes.c_ulong, [_void_p], None),
     # The Python C API, to reach the C functions that rosidl generates for every message type.
     'PyCapsule_GetName': (ctypes.pythonapi, ctypes.c_char_p, [ctypes.py_object], None),
     'PyCapsule_GetPointer':
@@ -290,9 +324,11 @@ def set_content_filter(subscription_ptr: int, expression: str,
 
 
 #: The library's own filter classes (cft_action/_filter_class.h): goal_id.uuid of action feedback,
-#: and the node of a parameter event.
+#: and the node of a parameter event; and the status reader's (cft_action/_status_trim.h), which
+#: only this process's readers know.
 UUID_FILTER_CLASS = 'CFT_ACTION_UUID'
 NODE_FILTER_CLASS = 'CFT_ACTION_NODE'
+STATUS_FILTER_CLASS = 'CFT_ACTION_STATUS'
 
 
 def filter_class_status() -> str:
@@ -456,13 +492,95 @@ def take_response(client_ptr: int,
     return info.request_id.sequence_number, response, info.source_timestamp
 
 
-# --- private layout: an action client's result client and feedback subscription -------------------
+# --- an action client's status, trimmed to its own goals (_status_trim.c) ------------------------
 
-# Jazzy's rcl_action_client_impl_t starts with three rcl_client_t (goal, cancel, result; one pointer
-# each) followed by the feedback rcl_subscription_t. This has held since Foxy, but it is private:
-# every use is verified.
+class StatusTable:
+    """The goals of one action client whose status entries go to Python, and the trimming takes.
+
+    A ``GoalStatusArray`` sample is taken serialized and trimmed natively to the entries that can
+    change one of this client's goal handles (cft_action/_status_trim.c says which); the others
+    are never converted to Python. Its methods may be called from any thread.
+    """
+
+    #: Bytes of the serialized message's first buffer; rmw grows it for larger samples.
+    INITIAL_CAPACITY = 4096
+
+    def __init__(self) -> None:
+        self._table = _lib.cft_status_table_new()
+        if not self._table:
+            raise MemoryError('cft_status_table_new returned NULL')
+        allocator = _lib.rcutils_get_default_allocator()
+        self._message = _Uint8Array()
+        _lib.rcutils_uint8_array_init(ctypes.byref(self._message), self.INITIAL_CAPACITY,
+                                      ctypes.byref(allocator))
+        self._out = ctypes.create_string_buffer(self.INITIAL_CAPACITY)
+
+    @property
+    def filter_expression(self) -> str:
+        """The expression of :data:`STATUS_FILTER_CLASS` that names this table, for the status
+        subscription: its reader then drops samples that list none of the table's goals."""
+        return f'cft_status_table = {_lib.cft_status_table_number(self._table)}'
+
+    def sending(self, goal_uuid: bytes) -> None:
+        """A goal's request is about to be sent: its status entries go to Python from now on."""
+        if _lib.cft_status_table_sending(self._table, bytes(goal_uuid)) != 0:
+            raise MemoryError('cft_status_table_sending: out of memory')
+
+    def responded(self, goal_uuid: bytes, accepted: bool) -> None:
+        """The goal's response was executed: its goal handle exists, or it was rejected."""
+        _lib.cft_status_table_responded(self._table, bytes(goal_uuid), int(accepted))
+
+    def take(self, subscription_ptr: int, responding: Optional[bytes],
+             all_pending: bool) -> tuple[Optional[bytes], int]:
+        """Take one status sample from the rcl subscription and trim it.
+
+        :param responding: the UUID of the goal whose response was taken with the sample, if any.
+        :param all_pending: a goal response was taken, and its goal is not known.
+
+        :return: ``(cdr, entries)``: a serialized ``GoalStatusArray`` (with its encapsulation
+            header) of the ``entries`` that go to Python; ``(the whole sample, -1)`` when it is not
+            plain CDR; ``(None, 0)`` when no sample was there.
+        """
+        info = _MessageInfo()
+        if not _lib.rcl_take_serialized_message(subscription_ptr, ctypes.byref(self._message),
+                                                ctypes.byref(info), None):
+            return None, 0
+        length = self._message.buffer_length
+        if len(self._out) < length:
+            self._out = ctypes.create_string_buffer(length)
+        out_length = ctypes.c_size_t(0)
+        entries = _lib.cft_status_trim(self._table, self._message.buffer, length, self._out,
+                                       ctypes.byref(out_length), responding, int(all_pending))
+        if entries < 0:
+            return ctypes.string_at(self._message.buffer, length), -1
+        return self._out.raw[:out_length.value], entries
+
+    def counts(self) -> tuple[int, int, int, int]:
+        """``(samples, entries, delivered, goals)``: samples trimmed, the entries they listed,
+        the entries that went to Python, and the goals whose entries may still go."""
+        return (_lib.cft_status_table_count(self._table, 0),
+                _lib.cft_status_table_count(self._table, 1),
+                _lib.cft_status_table_count(self._table, 2),
+                _lib.cft_status_table_count(self._table, 3))
+
+    def __del__(self) -> None:
+        # Python frees it when the last reference goes; rcl keeps no pointer into either.
+        table, self._table = getattr(self, '_table', None), None
+        if table:
+            _lib.cft_status_table_free(table)
+            _lib.rcutils_uint8_array_fini(ctypes.byref(self._message))
+
+
+# --- private layout: an action client's result client and subscriptions ---------------------------
+
+# Jazzy's rcl_action_client_impl_t (rcl_action/src/rcl_action/action_client_impl.h, rcl 9.2.x)
+# starts with three rcl_client_t (goal, cancel, result; one pointer each), followed by the feedback
+# and the status rcl_subscription_t (one pointer each). This has held since Foxy, but it is
+# private: every use is verified.
 _RESULT_CLIENT_OFFSET = 2 * ctypes.sizeof(ctypes.c_void_p)
-_FEEDBACK_SUBSCRIPTION_OFFSET = 3 * ctypes.sizeof(ctypes.c_void_p)
+#: The subscriptions, by the last part of their topic's name.
+_SUBSCRIPTION_OFFSETS = {'feedback': 3 * ctypes.sizeof(ctypes.c_void_p),
+                         'status': 4 * ctypes.sizeof(ctypes.c_void_p)}
 
 
 def _action_client_member(action_client_ptr: int, offset: int, expected: str, kind: str,
@@ -487,27 +605,35 @@ def _action_client_member(action_client_ptr: int, offset: int, expected: str, ki
     return candidate, ''
 
 
-def action_feedback_subscription(action_client_ptr: int,
-                                 resolved_action_name: str) -> tuple[Optional[int], str]:
-    """Locate the feedback subscription inside an ``rcl_action_client_t``.
+def action_subscription(action_client_ptr: int, resolved_action_name: str,
+                        topic: str) -> tuple[Optional[int], str]:
+    """Locate the feedback or the status subscription inside an ``rcl_action_client_t``.
 
     :param action_client_ptr: address of the ``rcl_action_client_t``
         (the ``pointer`` of the action client's rcl handle).
     :param resolved_action_name: the fully qualified action name, after remapping.
+    :param topic: ``'feedback'`` or ``'status'``: the subscription of
+        ``<action>/_action/<topic>``.
     :return: ``(address, '')`` when the layout check passed, or ``(None, reason)`` when it did not;
         in that case nothing at the guessed address was touched as a subscription.
     """
     return _action_client_member(
-        action_client_ptr, _FEEDBACK_SUBSCRIPTION_OFFSET,
-        resolved_action_name + '/_action/feedback', 'topic',
+        action_client_ptr, _SUBSCRIPTION_OFFSETS[topic],
+        f'{resolved_action_name}/_action/{topic}', 'topic',
         _lib.rcl_subscription_is_valid, subscription_topic_name)
+
+
+def action_feedback_subscription(action_client_ptr: int,
+                                 resolved_action_name: str) -> tuple[Optional[int], str]:
+    """:func:`action_subscription` of the feedback topic."""
+    return action_subscription(action_client_ptr, resolved_action_name, 'feedback')
 
 
 def action_result_client(action_client_ptr: int,
                          resolved_action_name: str) -> tuple[Optional[int], str]:
     """Locate the result client inside an ``rcl_action_client_t``.
 
-    As :func:`action_feedback_subscription`, for the ``rcl_client_t`` of ``get_result``.
+    As :func:`action_subscription`, for the ``rcl_client_t`` of ``get_result``.
     """
     return _action_client_member(
         action_client_ptr, _RESULT_CLIENT_OFFSET,

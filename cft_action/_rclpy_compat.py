@@ -45,6 +45,7 @@ _REQUIRED: tuple[tuple[Any, str], ...] = (
     (_RclpyActionClient, '_get_result_async'),
     (_RclpyActionClient, '_remove_pending_request'),
     (_RclpyActionClient, '_remove_pending_result_request'),
+    (_RclpyActionClient, '_generate_random_uuid'),
     (Node, '_validate_qos_or_depth_parameter'),
     (Node, '_validate_topic_or_service_name'),
     (Node, '_wake_executor'),
@@ -182,11 +183,6 @@ class CompatActionClient(_RclpyActionClient):
 
     # --- requests registered before their responses can be taken ---------------------------------
 
-    def send_goal_async(self, goal: Any, feedback_callback: Optional[Callable] = None,
-                        goal_uuid: Optional[Any] = None) -> Future:
-        with self._cft_request_lock:
-            return super().send_goal_async(goal, feedback_callback, goal_uuid)
-
     def _get_result_async(self, goal_handle: Any) -> Future:
         with self._cft_request_lock:
             return super()._get_result_async(goal_handle)
@@ -238,6 +234,25 @@ class CompatActionClient(_RclpyActionClient):
     def _cft_clear_readiness(self) -> None:
         """Make rclpy's take_data take neither the result response nor the feedback."""
         self._is_result_response_ready = self._is_feedback_ready = False
+
+    def _cft_claim_status(self) -> bool:
+        """Whether the last wait found status; rclpy's take_data then does not take it."""
+        ready, self._is_status_ready = self._is_status_ready, False
+        return ready
+
+    #: Told the UUID of every goal request just before it is sent, if set.
+    _cft_goal_sending: Optional[Callable[[bytes], None]] = None
+
+    def send_goal_async(self, goal: Any, feedback_callback: Optional[Callable] = None,
+                        goal_uuid: Optional[Any] = None) -> Future:
+        """rclpy's, with the goal's UUID chosen here and told to ``_cft_goal_sending``, under the
+        request lock."""
+        if goal_uuid is None:
+            goal_uuid = self._generate_random_uuid()
+        with self._cft_request_lock:
+            if self._cft_goal_sending is not None:
+                self._cft_goal_sending(bytes(goal_uuid.uuid))
+            return super().send_goal_async(goal, feedback_callback, goal_uuid)
 
     def _remove_pending_result_request(self, future: Future) -> None:
         # rclpy's done callback of every result request.

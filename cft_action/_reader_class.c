@@ -11,11 +11,16 @@
 // The factory creates filters only on such a thread: those are the process's own readers. A writer
 // of this process that discovers a reader with this class gets no filter for it (the factory says
 // unsupported), so it sends that reader everything and filters nothing, unguarded.
+// Besides the shared classes it answers one of its own, CFT_STATUS_CLASS (_status_trim.h), which
+// the guard does not know: no writer anywhere filters status (docs/INTERNALS.md section 20).
 #define _GNU_SOURCE
 #include <dlfcn.h>
 
+#include <string.h>
+
 #include "_patch.h"
 #include "_filter_class.h"
+#include "_status_trim.h"
 
 #define EXPORT __attribute__((visibility("default")))
 
@@ -38,7 +43,8 @@ static struct cft_install installed = CFT_INSTALL_INIT;  // 0: ours; 2: the guar
 
 static bool may_create(void) { return requested != NULL; }
 static void remember(void *filter) { created = filter; }
-static const struct cft_filter_class_owner reader_owner = {may_create, remember};
+static const struct cft_filter_class_owner reader_owner = {may_create, remember, CFT_STATUS_CLASS,
+                                                          &cft_status_grammar};
 
 static void *find(void *self, const char *class_name) {
   void *factory = cft_filter_factory_for(class_name, &reader_owner);
@@ -72,10 +78,13 @@ EXPORT int cft_filter_class_install(void) { return cft_install_once(&installed, 
 
 EXPORT const char *cft_filter_class_error(void) { return installed.error; }
 
-// Around one rcl content-filter call for a reader that is to use `class_name` (CFT_UUID_CLASS or
-// CFT_NODE_CLASS; another name makes the call a plain DDS-SQL one).
+// Around one rcl content-filter call for a reader that is to use `class_name` (CFT_UUID_CLASS,
+// CFT_NODE_CLASS or CFT_STATUS_CLASS; another name makes the call a plain DDS-SQL one).
 EXPORT void cft_filter_class_begin(const char *class_name) {
-  requested = cft_filter_class_name(class_name);  // the caller's may not outlive this call
+  // The caller's string may not outlive this call.
+  requested = class_name != NULL && strcmp(class_name, CFT_STATUS_CLASS) == 0
+                  ? CFT_STATUS_CLASS
+                  : cft_filter_class_name(class_name);
   created = NULL;
 }
 

@@ -23,7 +23,6 @@ import os
 import time
 from typing import Any, Callable, NamedTuple, Optional
 
-from action_msgs.msg import GoalStatus
 from rclpy.node import Node
 from rclpy.qos import qos_profile_services_default
 from rclpy.task import Future
@@ -34,6 +33,7 @@ from cft_action._action_entities import ActionEntities
 from cft_action._feedback_filter import FeedbackFilter
 from cft_action._filtered_reader import filter_class_for, WRITER_FILTERING, WRITER_FILTERING_ENV
 from cft_action._finished_goals import FinishedGoals
+from cft_action._goal_status import GoalStatusState, OwnGoalStatus
 from cft_action._held_goals import cancel_goal_probe, HeldGoal, HeldGoals
 from cft_action._rclpy_compat import CompatActionClient, PromptLogger
 from cft_action.arrival import ArrivalGate, RemotePublishers
@@ -41,14 +41,11 @@ from cft_action.errors import InvalidArgumentError
 from cft_action.goal_filter import MODES
 from cft_action.subscription import is_content_filter_supported
 
-__all__ = ['ActionClient', 'FeedbackFilterState', 'FEEDBACK_FILTER_ENV', 'WRITER_FILTERING_ENV',
-           'WRITER_FILTERING']
+__all__ = ['ActionClient', 'FeedbackFilterState', 'FEEDBACK_FILTER_ENV', 'GoalStatusState',
+           'WRITER_FILTERING_ENV', 'WRITER_FILTERING']
 
 #: Environment variable with which operators override the ``feedback_filter`` argument.
 FEEDBACK_FILTER_ENV = 'CFT_ACTION_FEEDBACK_FILTER'
-
-_TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
-                       GoalStatus.STATUS_ABORTED})
 
 #: Seconds a finished goal keeps its callback and filter term, for feedback that the server
 #: published before the result. Feedback, status and result travel on different topics, so the
@@ -195,8 +192,7 @@ class ActionClient(CompatActionClient):
         self._reader = self._filter.reader
         self._cft_action_name = action_name
         self._cancel_qos = kwargs.get('cancel_service_qos_profile', qos_profile_services_default)
-        self._feedback_taken = 0
-        self._feedback_dropped = 0
+        self._feedback_taken = self._feedback_dropped = 0
         super().__init__(node, action_type, action_name, request_lock=self._reader.lock,
                          **kwargs)  # _cft_before_first_wait
         if not self._filter.installed:
@@ -208,6 +204,7 @@ class ActionClient(CompatActionClient):
         # while an executor waits on it, nor after a goal was sent, or queued feedback would be
         # lost: so the filter goes in here, after rclpy created the rcl action client.
         self._assemble()
+        self._status.filter_reader()
         self._filter.install(self._cft_client_handle, self._entities.feedback_subscription,
                              f'{self._resolved_action_name}/_action/feedback',
                              self._entities.feedback_reason,
@@ -226,6 +223,9 @@ class ActionClient(CompatActionClient):
         self._entities = ActionEntities(self._cft_client_handle.pointer,
                                         self._resolved_action_name, self._cft_action_type,
                                         self._cft_logger)
+        self._status = OwnGoalStatus(self._entities, self._cft_action_type,
+                                     self._cft_goal_id_of_goal_request, self._cft_logger)
+        self._cft_goal_sending = self._status.sending
         feedback_topic = f'{self._resolved_action_name}/_action/feedback'
         self._feedback_writers = RemotePublishers(node, feedback_topic, [feedback_topic])
         cancel_service = f'{self._resolved_action_name}/_action/cancel_goal'
@@ -259,6 +259,11 @@ class ActionClient(CompatActionClient):
                 filtered_in=self._filter.filtered_in(self._feedback_taken,
                                                      self._feedback_writers.gids),
                 holds_suspended=self._held_goals.suspended)
+
+    @property
+    def goal_status_state(self) -> GoalStatusState:
+        """Whether status samples reach Python trimmed to this client's goals, and counters."""
+        return self._status.state
 
     def new_goal_uuid(self) -> UUID:
         """
@@ -388,8 +393,10 @@ class ActionClient(CompatActionClient):
 
     def _cft_take_data(self) -> dict:
         """As rclpy's take_data, except that the result response and the feedback are taken with
-        their source timestamps, and feedback published after its goal's result is dropped."""
+        their source timestamps, feedback published after its goal's result is dropped, and status
+        comes with only the entries that can change this client's goal handles."""
         result_ready, feedback_ready = self._cft_take_readiness()
+        status_ready = self._status.takes_here and self._cft_claim_status()
         entities = self._entities if self._entities.takes_here else None
         if entities is not None:
             self._cft_clear_readiness()  # rclpy's takes drop the sample info: taken below, with it
@@ -413,27 +420,18 @@ class ActionClient(CompatActionClient):
             if self._finished_goals.dropped(bytes(feedback.goal_id.uuid), stamp):
                 self._feedback_dropped += 1
                 del data['feedback']
+        self._status.take_into(data, status_ready)
         return data
 
     async def execute(self, taken_data: dict) -> None:
         """Execute work after data has been taken from a ready wait set.
 
-        As rclpy's, and it also notes goals that finished (rejected, succeeded, canceled or
-        aborted), so that their callbacks and filter terms are released even if nobody asks for
-        their results.
+        As rclpy's; it also notes goals that finished (rejected, or a terminal status), whose
+        callbacks and filter terms are then released even if nobody asks for their results.
         """
-        finished = []
-        if 'goal' in taken_data:
-            sequence_number, response = taken_data['goal']
-            goal_id = self._cft_goal_id_of_goal_request(sequence_number)
-            if goal_id is not None and not response.accepted:
-                finished.append(bytes(goal_id.uuid))
+        goal_id = self._cft_goal_id_of_goal_request(taken_data.get('goal', (None,))[0])
         await super().execute(taken_data)
-        if 'status' in taken_data:
-            finished += [bytes(s.goal_info.goal_id.uuid) for s in taken_data['status'].status_list
-                         if s.status in _TERMINAL]
-        if finished:
-            self._finished_goals.finished(finished)
+        self._finished_goals.finished(self._status.executed(taken_data, goal_id))
 
     def _note_result(self, sequence_number: int, stamp: int) -> None:
         goal_id = self._cft_goal_id_of_result_request(sequence_number)

@@ -36,6 +36,9 @@ What it counts, from ``go`` on:
 - ``maxrss_kb`` and ``rss_kb``: this process's peak and current resident set.
 - ``send_s``, ``last_response_s`` and ``last_callback_s``: seconds from ``go`` until every goal was
   sent, until the last goal response, and until the last feedback callback.
+- ``status_samples_read`` and ``status_entries_listed`` (``client``/``goals``): status samples
+  that the library's status trim read, and the goal entries they listed, most never converted to
+  Python (``status_entries`` counts those that were).
 - ``updates``: filter changes (``client``/``goals``: ``feedback_filter_state.updates``;
   ``upstream``: every ``set_content_filter`` call, with ``recreations`` of the DataReader).
 
@@ -146,11 +149,14 @@ def make_client(node: Node, config: str, action: str, qos: QoSProfile) -> Any:
 
 
 def filter_counters(client: Any) -> dict[str, Any]:
-    """The filter's counters, whatever the configuration."""
+    """The filter's counters, whatever the configuration; for cft_action, also the status trim's:
+    the status samples it read and the goal entries they listed."""
     state = getattr(client, 'feedback_filter_state', None)
     if state is not None:
+        status = client.goal_status_state
         return {'updates': state.updates, 'active': state.active, 'reason': state.reason,
-                'lib_taken': state.feedback_taken, 'lib_dropped': state.feedback_dropped}
+                'lib_taken': state.feedback_taken, 'lib_dropped': state.feedback_dropped,
+                'status_samples_read': status.samples, 'status_entries_listed': status.entries}
     if hasattr(client, 'filter_sets'):
         return {'updates': client.filter_sets, 'recreations': client.recreations,
                 'active': not client.disabled_reason, 'reason': client.disabled_reason}
@@ -265,7 +271,8 @@ class LoadClient:
         """Everything measured since ``go``."""
         counters = filter_counters(self.client)
         counters['updates_total'] = counters['updates']
-        for key in ('updates', 'recreations', 'lib_taken', 'lib_dropped'):
+        for key in ('updates', 'recreations', 'lib_taken', 'lib_dropped', 'status_samples_read',
+                    'status_entries_listed'):
             if key in counters:
                 counters[key] -= self.start_counters.get(key, 0)
         return {**self.progress(), 'goals': self.goals, 'order': self.order,

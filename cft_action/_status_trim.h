@@ -1,0 +1,16 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The status trim's reader-side filter class (_status_trim.c), for _reader_class.c.
+#ifndef CFT_ACTION_STATUS_TRIM_H_
+#define CFT_ACTION_STATUS_TRIM_H_
+
+#include "_filter_class.h"
+
+// A client's status reader drops, in its receive thread, every sample that can change none of the
+// client's goal handles, by the status table that the expression `cft_status_table = <number>`
+// names (_status_trim.c). Only a client's own readers know the class.
+#define CFT_STATUS_CLASS "CFT_ACTION_STATUS"
+
+extern const struct cft_filter_grammar cft_status_grammar;
+
+#endif  // CFT_ACTION_STATUS_TRIM_H_
