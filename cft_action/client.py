@@ -24,7 +24,8 @@ import time
 from typing import Any, Callable, NamedTuple, Optional
 
 from rclpy.node import Node
-from rclpy.qos import qos_profile_services_default
+from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_services_default, QoSProfile,
+                       ReliabilityPolicy)
 from rclpy.task import Future
 from unique_identifier_msgs.msg import UUID
 
@@ -67,6 +68,13 @@ RELEASE_CHECK_PERIOD = 1.0
 #: answer the goal either; the goal is then sent anyway, as rclpy sends it, and its first feedback
 #: may be lost.
 FILTER_ARRIVAL_TIMEOUT = 5.0
+
+#: Depth of the goal, result and cancel services' queues of a client created without a profile for
+#: them (rclpy's is 10). rmw_fastrtps delivers each response of an action's service to the response
+#: reader of every client, which keeps the last N of all of them, so at 10 a client that lags behind
+#: the others loses its own responses among theirs, and those goals never complete (README,
+#: "Differences from rclpy"). Queued samples cost memory only while they wait to be taken.
+SERVICE_QUEUE_DEPTH = 1000
 
 #: Seconds between polls of the arrival probe while goal requests are held.
 ARRIVAL_POLL_PERIOD = 0.01
@@ -119,6 +127,14 @@ class FeedbackFilterState(NamedTuple):
     arrival_timeouts: int = 0
     filtered_in: str = 'unknown'
     holds_suspended: bool = False
+
+
+def _deep_service_queues(kwargs: dict[str, Any]) -> dict[str, Any]:
+    """``kwargs`` with a profile of ``SERVICE_QUEUE_DEPTH`` for each service not given one."""
+    deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=SERVICE_QUEUE_DEPTH,
+                      reliability=ReliabilityPolicy.RELIABLE, durability=DurabilityPolicy.VOLATILE)
+    return {**{f'{service}_service_qos_profile': deep for service in ('goal', 'result', 'cancel')},
+            **kwargs}
 
 
 def _resolve_mode(feedback_filter: Optional[str], optimization: Optional[bool]) -> str:
@@ -177,9 +193,9 @@ class ActionClient(CompatActionClient):
             unguarded server time per sample and filtered client, and exposes it to
             Fast-DDS#4878 (docs/SAFETY.md). The environment variable
             ``CFT_ACTION_WRITER_FILTERING`` overrides it.
-        :param kwargs: ``callback_group``, ``goal_service_qos_profile``,
-            ``result_service_qos_profile``, ``cancel_service_qos_profile``,
-            ``feedback_sub_qos_profile`` and ``status_sub_qos_profile``, as for rclpy.
+        :param kwargs: ``callback_group``, ``feedback_sub_qos_profile``, ``status_sub_qos_profile``
+            as for rclpy; ``goal_``, ``result_`` and ``cancel_service_qos_profile`` too, which
+            default to a depth of ``SERVICE_QUEUE_DEPTH`` (rclpy's: 10).
         :raises ValueError: if ``feedback_filter``, ``writer_filtering`` or their environment
             variables name no known value, or ``enable_feedback_msg_optimization`` contradicts
             ``feedback_filter``.
@@ -194,7 +210,7 @@ class ActionClient(CompatActionClient):
         self._cancel_qos = kwargs.get('cancel_service_qos_profile', qos_profile_services_default)
         self._feedback_taken = self._feedback_dropped = 0
         super().__init__(node, action_type, action_name, request_lock=self._reader.lock,
-                         **kwargs)  # _cft_before_first_wait
+                         **_deep_service_queues(kwargs))  # _cft_before_first_wait
         if not self._filter.installed:
             self._reader.fall_back('rclpy did not add the client through Node.add_waitable')
             self._assemble()

@@ -314,7 +314,15 @@ def test_every_goal_handle_sees_what_plain_rclpy_gives(ros, mode, guarded):
             return all(h.status == listed.get(bytes(h.goal_id.uuid), h.status) for h in live) \
                 and listed.get(bytes(futures[13].result().goal_id.uuid)) \
                 == GoalStatus.STATUS_EXECUTING
-        assert ros.spin_until(current, 20), client.goal_status_state
+        def stale() -> list[str]:
+            listed = {bytes(s.goal_info.goal_id.uuid): s.status
+                      for s in (latest[0].status_list if latest else [])}
+            return [f'{bytes(h.goal_id.uuid).hex()[:8]}: handle {h.status}, listed '
+                    f'{listed.get(bytes(h.goal_id.uuid))}' for h in live] + [
+                'the goal to cancel is listed as '
+                f'{listed.get(bytes(futures[13].result().goal_id.uuid))}',
+                f'{len(listed)} goals in the latest sample', f'mismatches {client.mismatches[:5]}']
+        assert ros.spin_until(current, 20), (client.goal_status_state, stale())
         cancel = futures[13].result().cancel_goal_async()
         assert ros.spin_until(cancel.done, 20)
         accepted = [f.result() for f in futures if f.result().accepted]
