@@ -1,7 +1,12 @@
 """Session set-up: an isolated ROS domain, localhost-only discovery, and process hygiene."""
 
+import ctypes
 import os
+import shutil
 import signal
+import subprocess
+import tempfile
+from pathlib import Path
 
 from harness.domain import unused_domain  # no ROS import: the domain must come first
 
@@ -33,6 +38,36 @@ def ros():
         session.close()
 
 
+def pytest_configure(config):
+    """A native backtrace of this process if it dies of a signal (tests/helpers/native_backtrace.c).
+
+    Written to a copy of the stderr the suite started with, as faulthandler writes its Python
+    frames: output capture replaces descriptor 2 during each test.
+    """
+    config.native_backtrace = install_native_backtrace()
+
+
+def install_native_backtrace() -> str:
+    """Compile and install the handler; say what came of it (for the report header)."""
+    compiler, gdb, timeout = shutil.which('cc') or shutil.which('gcc'), shutil.which('gdb'), \
+        shutil.which('timeout')
+    if not (compiler and gdb and timeout):
+        return 'off (needs cc, gdb and timeout on PATH)'
+    source = Path(__file__).parent / 'helpers' / 'native_backtrace.c'
+    library = Path(tempfile.mkdtemp(prefix='cft-native-backtrace-')) / 'native_backtrace.so'
+    built = subprocess.run([compiler, '-shared', '-fPIC', '-O1', '-o', str(library), str(source)],
+                           capture_output=True, text=True, timeout=60)
+    if built.returncode != 0:
+        return f'off (does not compile: {built.stderr.strip()[:200]})'
+    install = ctypes.CDLL(str(library)).native_backtrace_install
+    shutil.rmtree(library.parent)  # loaded: the mapping outlives the file
+    install.argtypes = [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_int, ctypes.c_int]
+    if install(timeout.encode(), gdb.encode(), 120, os.dup(2)) != 0:
+        return 'off (sigaction failed)'
+    return f'on ({gdb})'
+
+
 def pytest_report_header(config):
     """The session's domain, so that a failure can be matched with the other processes on it."""
-    return f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} (LOCALHOST discovery)"
+    return [f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} (LOCALHOST discovery)",
+            f'native backtrace on a fatal signal: {config.native_backtrace}']
