@@ -24,6 +24,7 @@ from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 
 from harness.polling import TIMEOUT, wait_until
+from harness.ros import leave_spinning_process
 
 
 
@@ -91,10 +92,10 @@ def main() -> None:
                 clients[words[1]] = AsyncParameterClient(client_node, words[1])
             reply = remote_set(clients[words[1]], words[2], words[3] == 'true')
             print(f'REMOTE {reply}', flush=True)
-    executor.shutdown(timeout_sec=5)
-    for node in [*nodes.values(), client_node]:
-        node.destroy_node()
-    rclpy.shutdown()
+    def destroy() -> None:
+        for node in [*nodes.values(), client_node]:
+            node.destroy_node()
+    leave_spinning_process(executor, [spinner], destroy)
 
 
 if __name__ == '__main__':

@@ -61,7 +61,6 @@ from __future__ import annotations
 import argparse
 import array
 import json
-import os
 import resource
 import sys
 import threading
@@ -79,6 +78,7 @@ from rclpy.task import Future
 from test_msgs.action import Fibonacci
 
 from cft_action import guard
+from harness.ros import leave_spinning_process
 
 #: Index of the first padding element in a feedback ``sequence``.
 HEADER = 3
@@ -460,23 +460,16 @@ def main(argv: list[str]) -> None:
                 takes = json.dumps(server.server.takes)
             with out:
                 print('TAKES ' + takes, flush=True)
-    # Stop every thread that calls into rclpy, then leave without interpreter finalization: a
-    # daemon thread that re-enters Python during finalization is ended by pthread_exit, whose
-    # unwinding through rclpy's C++ frames calls std::terminate (SIGABRT): a crash watcher would
-    # count that as a crash of the server.
+    # A crash watcher would count an abort at exit as a crash of the server; without the clean
+    # destruction, the participant's shared-memory segment and ports stay in /dev/shm (measured:
+    # 6 files a server, thousands over a few sessions).
     stop.set()
     server.running = False
-    server.ticker.join(2.0)
-    executor.shutdown(timeout_sec=2)
-    spinner.join(2.0)
-    if not (server.ticker.is_alive() or spinner.is_alive()):
-        # The participant's shared-memory segment and ports stay in /dev/shm after an _exit
-        # without it (measured: 6 files a server, thousands over a few sessions).
+
+    def destroy() -> None:
         server.server.destroy()
         node.destroy_node()
-        rclpy.try_shutdown()
-    sys.stdout.flush()
-    os._exit(0)
+    leave_spinning_process(executor, [server.ticker, spinner], destroy)
 
 
 if __name__ == '__main__':
