@@ -29,4 +29,12 @@ int cft_install_once(struct cft_install *once, int (*install)(struct cft_install
 // Records why the installation failed; returns `status`.
 int cft_install_fail(struct cft_install *once, int status, const char *what, const char *detail);
 
+// For an install function: the already loaded library whose soname is `soname`, and the address
+// of each of its `count` `names` (searched from that library on, as its own PLT binds them) in
+// `found`. Returns the library's dlopen handle, or NULL after recording why: `*status` is then -1
+// (the library is not loaded) or -2 (a name is not found).
+#include <stddef.h>
+void *cft_resolve(struct cft_install *once, const char *soname, const char *const *names,
+                  size_t count, void **found, int *status);
+
 #endif  // CFT_ACTION_PATCH_H_

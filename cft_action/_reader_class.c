@@ -13,9 +13,6 @@
 // unsupported), so it sends that reader everything and filters nothing, unguarded.
 // Besides the shared classes it answers one of its own, CFT_STATUS_CLASS (_status_trim.h), which
 // the guard does not know: no writer anywhere filters status (docs/INTERNALS.md section 20).
-#define _GNU_SOURCE
-#include <dlfcn.h>
-
 #include <string.h>
 
 #include "_patch.h"
@@ -58,18 +55,17 @@ static void *create_cft(void *self, const void *name, void *related_topic, const
 }
 
 static int install(struct cft_install *once) {
-  void *library = dlopen(FASTRTPS_SONAME, RTLD_NOW | RTLD_NOLOAD);
-  if (library == NULL)
-    return cft_install_fail(once, -1, FASTRTPS_SONAME " is not loaded", dlerror());
-  real_find = (find_fn)dlsym(library, FIND);
-  real_create_cft = (create_cft_fn)dlsym(library, CREATE_CFT);
-  if (real_find == NULL || real_create_cft == NULL)
-    return cft_install_fail(once, -2, "a member is not exported by " FASTRTPS_SONAME, dlerror());
-  int found = cft_patch_got(FASTRTPS_SONAME, FIND, (void *)real_find, (void *)find);
-  if (found < 0) return cft_install_fail(once, -3, "no PLT slot in " FASTRTPS_SONAME " for", FIND);
+  static const char *const names[] = {FIND, CREATE_CFT};
+  void *resolved[2];
+  int status;
+  if (cft_resolve(once, FASTRTPS_SONAME, names, 2, resolved, &status) == NULL) return status;
+  real_find = (find_fn)resolved[0];
+  real_create_cft = (create_cft_fn)resolved[1];
+  int ours = cft_patch_got(FASTRTPS_SONAME, FIND, (void *)real_find, (void *)find);
+  if (ours < 0) return cft_install_fail(once, -3, "no PLT slot in " FASTRTPS_SONAME " for", FIND);
   if (cft_patch_got(FASTRTPS_SONAME, CREATE_CFT, (void *)real_create_cft, (void *)create_cft) != 1)
     return cft_install_fail(once, -4, "no PLT slot in " FASTRTPS_SONAME " for", CREATE_CFT);
-  return found == 1 ? 0 : 2;
+  return ours == 1 ? 0 : 2;
 }
 
 // 0 once this library answers the class, 2 if the preloaded guard does, < 0 if neither can be

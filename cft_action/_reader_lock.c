@@ -19,7 +19,6 @@
 // is assumed. Readers that hold their RTPSReader's mutex wait only for the swap itself, which
 // takes no reader mutex, so the lock order cannot cycle.
 #define _GNU_SOURCE
-#include <dlfcn.h>
 #include <pthread.h>
 #include <stdbool.h>
 #include <stdint.h>
@@ -89,14 +88,14 @@ static uint32_t locked_create(void *self, const char *filter_class, const char *
 }
 
 static int install(struct cft_install *once) {
-  void *library = dlopen(FASTRTPS_SONAME, RTLD_NOW | RTLD_NOLOAD);
-  if (library == NULL)
-    return cft_install_fail(once, -1, FASTRTPS_SONAME " is not loaded", dlerror());
-  real_is_relevant = (is_relevant_fn)dlsym(library, IS_RELEVANT);
-  real_is_relevant_thunk = (is_relevant_fn)dlsym(library, IS_RELEVANT_THUNK);
-  real_create = (create_fn)dlsym(library, CREATE_FILTER);
-  if (!real_is_relevant || !real_is_relevant_thunk || !real_create)
-    return cft_install_fail(once, -2, "a member is not exported by " FASTRTPS_SONAME, dlerror());
+  static const char *const names[] = {IS_RELEVANT, IS_RELEVANT_THUNK, CREATE_FILTER};
+  void *resolved[3];
+  int status;
+  void *library = cft_resolve(once, FASTRTPS_SONAME, names, 3, resolved, &status);
+  if (library == NULL) return status;
+  real_is_relevant = (is_relevant_fn)resolved[0];
+  real_is_relevant_thunk = (is_relevant_fn)resolved[1];
+  real_create = (create_fn)resolved[2];
   int creates = cft_patch_vtable(library, FACTORY_VTABLE, (void *)real_create, (void *)locked_create);
   if (creates < 1)
     return cft_install_fail(once, -3, "no create_content_filter slot in", FACTORY_VTABLE);

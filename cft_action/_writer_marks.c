@@ -15,7 +15,6 @@
 // redirection are seen, so cft_writer_marks_install says whether it came before any participant
 // existed (the caller knows; see _rcl.py).
 #define _GNU_SOURCE
-#include <dlfcn.h>
 #include <pthread.h>
 #include <stdbool.h>
 #include <stdint.h>
@@ -78,14 +77,12 @@ static bool add_entity(void *self, const struct gid *gid, const void *topic_name
 static struct cft_install installed = CFT_INSTALL_INIT;
 
 static int install(struct cft_install *once) {
-  void *library = dlopen(RMW_SHARED_SONAME, RTLD_NOW | RTLD_NOLOAD);
-  if (library == NULL)
-    return cft_install_fail(once, -1, RMW_SHARED_SONAME " is not loaded", dlerror());
-  // Searched from librmw_fastrtps_shared_cpp on: the definitions its PLT binds to.
-  real_parse = (parse_fn)dlsym(library, PARSE);
-  real_add_entity = (add_entity_fn)dlsym(library, ADD_ENTITY);
-  if (real_parse == NULL || real_add_entity == NULL)
-    return cft_install_fail(once, -2, "rmw_dds_common lacks a function", dlerror());
+  static const char *const names[] = {PARSE, ADD_ENTITY};
+  void *resolved[2];
+  int status;
+  if (cft_resolve(once, RMW_SHARED_SONAME, names, 2, resolved, &status) == NULL) return status;
+  real_parse = (parse_fn)resolved[0];
+  real_add_entity = (add_entity_fn)resolved[1];
   if (cft_patch_got(RMW_SHARED_SONAME, PARSE, (void *)real_parse, (void *)parse) != 1)
     return cft_install_fail(once, -3, "cannot redirect the PLT slot of", PARSE);
   if (cft_patch_got(RMW_SHARED_SONAME, ADD_ENTITY, (void *)real_add_entity, (void *)add_entity) != 1)
