@@ -144,6 +144,23 @@ def node_waiter(node: Any) -> Callable[[Callable[[], bool], float], bool]:
     return wait
 
 
+def connect_helper_client(node: Any, client: Any) -> bool:
+    """In a client process of tests/helpers: wait for the server and prove the feedback path.
+
+    Prints ``NO SERVER`` or ``NO FEEDBACK <why>`` for the test to read and returns False when
+    either does not come; True when the client may say ``READY``.
+    """
+    if not client.wait_for_server(timeout_sec=20):
+        print('NO SERVER', flush=True)
+        return False
+    try:
+        prove_feedback_path(node_waiter(node), client)
+    except AssertionError as error:
+        print(f'NO FEEDBACK {error}', flush=True)
+        return False
+    return True
+
+
 def prove_feedback_path(wait: Callable[[Callable[[], bool], float], bool], client: Any,
                         tries: int = 10) -> int:
     """Send order-1 goals until one's feedback reaches ``client``; return how many were sent.

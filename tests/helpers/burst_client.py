@@ -31,7 +31,7 @@ from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient
-from tests.support import node_waiter, prove_feedback_path
+from tests.support import connect_helper_client
 
 DEPTH = 40
 ORDER = 10
@@ -52,13 +52,7 @@ def main() -> None:
     node = Node(f'cft_burst_client_{uuid.uuid4().hex[:8]}')
     client = ActionClient(node, Fibonacci, action, feedback_filter=mode,
                           feedback_sub_qos_profile=QoSProfile(depth=DEPTH))
-    if not client.wait_for_server(timeout_sec=20):
-        print('NO SERVER', flush=True)
-        return
-    try:
-        prove_feedback_path(node_waiter(node), client)
-    except AssertionError as error:
-        print(f'NO FEEDBACK {error}', flush=True)
+    if not connect_helper_client(node, client):
         return
     rcutils_logger._find_caller = slowed(stall_s)
     received: dict[str, list[int]] = {}

@@ -23,7 +23,7 @@ from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient
-from tests.support import node_waiter, prove_feedback_path
+from tests.support import connect_helper_client
 
 
 # rclpy's default depth of 10 drops goal responses and feedback in bursts, and any keep-last
@@ -46,13 +46,7 @@ def main() -> None:
     else:
         client = ActionClient(node, Fibonacci, action, feedback_filter=mode,
                               writer_filtering=writer_filtering, **DEEP_QOS)
-    if not client.wait_for_server(timeout_sec=20):
-        print('NO SERVER', flush=True)
-        return
-    try:
-        prove_feedback_path(node_waiter(node), client)
-    except AssertionError as error:
-        print(f'NO FEEDBACK {error}', flush=True)
+    if not connect_helper_client(node, client):
         return
     proof = getattr(client, 'feedback_filter_state', None)
     proof_verdicts = client._reader.reader_verdicts if proof else 0
