@@ -137,8 +137,9 @@ def test_only_guarded_nodes_filter_on_their_side(ros, guarded):
         handler.destroy()
     finally:
         alive = child.poll() is None
-        child.stop()
+        ended = child.stop()
     assert alive, f'param_nodes.py died\n{child.tail()}'
+    assert ended == 0, f'param_nodes.py did not end cleanly\n{child.tail()}'
 
 
 def test_a_dds_sql_expression_of_ones_own_needs_writer_filtering_any(ros):

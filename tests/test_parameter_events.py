@@ -68,8 +68,10 @@ def start_nodes():
     yield start
     for child in children:
         alive = child.poll() is None
-        child.stop()
+        ended = child.stop()
         assert alive, f'param_nodes.py died\n{child.tail()}'
+        # A peer that aborts at exit can crash this process later (harness.ros)
+        assert ended == 0, f'param_nodes.py did not end cleanly\n{child.tail()}'
 
 
 def in_force(ros, handler, names, timeout=SYNC_TIMEOUT):

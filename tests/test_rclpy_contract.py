@@ -251,7 +251,8 @@ def target():
         yield name, child
         assert child.poll() is None, f'param_nodes.py died\n{child.tail()}'
     finally:
-        child.stop()
+        ended = child.stop()
+    assert ended == 0, f'param_nodes.py did not end cleanly\n{child.tail()}'
 
 
 def until_called(ros, child, node_name, parameter, calls, timeout=15.0):
