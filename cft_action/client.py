@@ -32,6 +32,7 @@ from unique_identifier_msgs.msg import UUID
 from cft_action import _rcl
 from cft_action._action_entities import ActionEntities
 from cft_action._feedback_filter import FeedbackFilter
+from cft_action._feedback_intake import FeedbackIntake
 from cft_action._filtered_reader import filter_class_for, WRITER_FILTERING, WRITER_FILTERING_ENV
 from cft_action._finished_goals import FinishedGoals
 from cft_action._goal_status import GoalStatusState, OwnGoalStatus
@@ -208,7 +209,6 @@ class ActionClient(CompatActionClient):
         self._reader = self._filter.reader
         self._cft_action_name = action_name
         self._cancel_qos = kwargs.get('cancel_service_qos_profile', qos_profile_services_default)
-        self._feedback_taken = self._feedback_dropped = 0
         super().__init__(node, action_type, action_name, request_lock=self._reader.lock,
                          **_deep_service_queues(kwargs))  # _cft_before_first_wait
         if not self._filter.installed:
@@ -257,6 +257,8 @@ class ActionClient(CompatActionClient):
         self._finished_goals = FinishedGoals(
             node, self.callback_group, lock, self._cft_feedback_callbacks, self._filter.release,
             grace=FINISHED_GOAL_GRACE, period=RELEASE_CHECK_PERIOD)
+        self._intake = FeedbackIntake(self._entities, self._finished_goals, self._filter,
+                                      self._feedback_writers.gids, self.callback_group)
 
     # --- public API -------------------------------------------------------------------------------
 
@@ -269,10 +271,10 @@ class ActionClient(CompatActionClient):
             return FeedbackFilterState(
                 self._filter.mode, common.active, common.reason, common.expression, common.updates,
                 live_goals=plan.live_goals if plan else 0,
-                feedback_taken=self._feedback_taken, feedback_dropped=self._feedback_dropped,
+                feedback_taken=self._intake.taken, feedback_dropped=self._intake.dropped,
                 confirmed=plan is None or self._arrival.is_confirmed(self._held_goals.needed()),
                 held_goals=self._held_goals.count, arrival_timeouts=self._arrival.timeouts,
-                filtered_in=self._filter.filtered_in(self._feedback_taken,
+                filtered_in=self._filter.filtered_in(self._intake.taken,
                                                      self._feedback_writers.gids),
                 holds_suspended=self._held_goals.suspended)
 
@@ -424,29 +426,22 @@ class ActionClient(CompatActionClient):
             if response is not None and sequence_number is not None:
                 data['result'] = (sequence_number, response)
                 self._note_result(sequence_number, stamp)
-        stamp = 0
-        if feedback_ready and entities is not None:
-            feedback, stamp = entities.take_feedback()
-            if feedback is not None:
-                data['feedback'] = feedback
-        feedback = data.get('feedback')
-        if feedback is not None:
-            self._feedback_taken += 1
-            self._filter.log_if_unguarded(self._feedback_taken, self._feedback_writers.gids)
-            if self._finished_goals.dropped(bytes(feedback.goal_id.uuid), stamp):
-                self._feedback_dropped += 1
-                del data['feedback']
+        self._intake.take_into(data, feedback_ready and entities is not None)
         self._status.take_into(data, status_ready)
         return data
 
     async def execute(self, taken_data: dict) -> None:
         """Execute work after data has been taken from a ready wait set.
 
-        As rclpy's; it also notes goals that finished (rejected, or a terminal status), whose
-        callbacks and filter terms are then released even if nobody asks for their results.
+        As rclpy's, with every feedback message taken in this wake; it also notes goals that
+        finished (rejected, or a terminal status), whose callbacks and filter terms are then
+        released even if nobody asks for their results.
         """
         goal_id = self._cft_goal_id_of_goal_request(taken_data.get('goal', (None,))[0])
+        more = self._intake.more(taken_data)
         await super().execute(taken_data)
+        for feedback in more:
+            await super().execute({'feedback': feedback})
         self._finished_goals.finished(self._status.executed(taken_data, goal_id))
 
     def _note_result(self, sequence_number: int, stamp: int) -> None:
