@@ -21,13 +21,14 @@ from cft_action._action_entities import ActionEntities
 from cft_action._feedback_filter import FeedbackFilter
 from cft_action._finished_goals import FinishedGoals
 
-__all__ = ['FEEDBACK_BATCH', 'FeedbackIntake']
+__all__ = ['FEEDBACK_BATCH', 'FeedbackIntake', 'MORE_FEEDBACK']
 
 #: Feedback messages that one wake takes at most, in a mutually exclusive callback group.
 FEEDBACK_BATCH = 64
 
-#: The key of ``take_data``'s dictionary under which the messages after the first one go.
-_MORE = 'cft_action.more_feedback'
+#: The key of ``take_data``'s dictionary under which the feedback messages taken after the one
+#: under ``'feedback'`` go, in order; for code that subclasses the client and reads ``take_data``.
+MORE_FEEDBACK = 'cft_action.more_feedback'
 
 
 class FeedbackIntake:
@@ -67,12 +68,12 @@ class FeedbackIntake:
         if kept:
             data['feedback'] = kept[0]
         if len(kept) > 1:
-            data[_MORE] = kept[1:]
+            data[MORE_FEEDBACK] = kept[1:]
 
     @staticmethod
     def more(data: dict) -> list[Any]:
         """Remove from ``data`` and return the messages after its ``'feedback'``, in order."""
-        return data.pop(_MORE, [])
+        return data.pop(MORE_FEEDBACK, [])
 
     def _delivers(self, message: Any, stamp: int) -> bool:
         self.taken += 1

@@ -32,7 +32,7 @@ from unique_identifier_msgs.msg import UUID
 from cft_action import _rcl
 from cft_action._action_entities import ActionEntities
 from cft_action._feedback_filter import FeedbackFilter
-from cft_action._feedback_intake import FeedbackIntake
+from cft_action._feedback_intake import FeedbackIntake, MORE_FEEDBACK
 from cft_action._filtered_reader import filter_class_for, WRITER_FILTERING, WRITER_FILTERING_ENV
 from cft_action._finished_goals import FinishedGoals
 from cft_action._goal_status import GoalStatusState, OwnGoalStatus
@@ -44,7 +44,7 @@ from cft_action.goal_filter import MODES
 from cft_action.subscription import is_content_filter_supported
 
 __all__ = ['ActionClient', 'FeedbackFilterState', 'FEEDBACK_FILTER_ENV', 'GoalStatusState',
-           'WRITER_FILTERING_ENV', 'WRITER_FILTERING']
+           'MORE_FEEDBACK', 'WRITER_FILTERING_ENV', 'WRITER_FILTERING']
 
 #: Environment variable with which operators override the ``feedback_filter`` argument.
 FEEDBACK_FILTER_ENV = 'CFT_ACTION_FEEDBACK_FILTER'

@@ -81,6 +81,16 @@ _TERMINAL = frozenset({GoalStatus.STATUS_SUCCEEDED, GoalStatus.STATUS_CANCELED,
 STATUS_COUNTERS = ('status', 'status_entries', 'status_cdr_bytes')
 
 
+def taken_feedback(data: dict) -> list[Any]:
+    """The feedback messages in a ``take_data`` dictionary: rclpy's one, or the library's client's
+    batch (``cft_action.client.MORE_FEEDBACK``)."""
+    first = data.get('feedback')
+    # Looked up, not imported: a process of plain rclpy clients does not load the library.
+    library = sys.modules.get('cft_action.client')
+    more = data.get(library.MORE_FEEDBACK, []) if library is not None else []
+    return ([] if first is None else [first]) + list(more)
+
+
 class CountingMixin:
     """Counts feedback taken from rcl, own and foreign, and status messages, in ``take_data``."""
 
@@ -96,8 +106,7 @@ class CountingMixin:
     def take_data(self) -> dict:
         """Take as the base class does, and count the feedback or status message taken."""
         data = super().take_data()  # type: ignore[misc]  # the action client after it in the MRO
-        feedback = data.get('feedback')
-        if feedback is not None:
+        for feedback in taken_feedback(data):
             if bytes(feedback.goal_id.uuid) in self.own_uuids:
                 self.own_taken += 1
             else:
@@ -119,8 +128,7 @@ def recording_feedback(base: type) -> type:
     class Counting(base):
         def take_data(self) -> dict:
             data = super().take_data()
-            feedback = data.get('feedback')
-            if feedback is not None:
+            for feedback in taken_feedback(data):
                 self.feedback_taken.append((bytes(feedback.goal_id.uuid),
                                             int(feedback.feedback.sequence[0])
                                             if len(feedback.feedback.sequence) else -1))
