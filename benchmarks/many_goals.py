@@ -272,10 +272,10 @@ def summarize(phase: dict[str, Any]) -> dict[str, Any]:
     d = phase['delivery']
     calls_before = before.get('guard_calls', {}).get('process_reader_filter_info', 0)
     calls_after = after.get('guard_calls', {}).get('process_reader_filter_info', 0)
-    # The client's filter is of the library's class (CFT_ACTION_UUID), which the guard keeps in
-    # its own counters (guard.filter_class_counts), not in the DDS-SQL ones of guard_filter.
-    compiled_before = before.get('guard_filter_class', {}).get('filters', 0)
-    compiled = after.get('guard_filter_class', {}).get('filters', 0)
+    # The client's reader has the library's class (CFT_ACTION_UUID): the guard keeps it in its own
+    # table and judges each sample in is_relevant (guard.filter_counts: kept, relevance_verdicts).
+    compiled_before = before.get('guard_filter', {}).get('kept', 0)
+    compiled = after.get('guard_filter', {}).get('kept', 0)
     latency = report.get('latency_us', [])
     return {
         'config': phase['config'], 'goals': phase['goals'],
@@ -292,8 +292,8 @@ def summarize(phase: dict[str, Any]) -> dict[str, Any]:
         'guard_filter_events_window': calls_after - calls_before,
         'guard_filter_events_total': calls_after,
         'guard_compiled_window': compiled - compiled_before, 'guard_compiled_total': compiled,
-        'guard_uuid_verdicts': after.get('guard_filter_class', {}).get('verdicts', 0)
-        - before.get('guard_filter_class', {}).get('verdicts', 0),
+        'guard_uuid_verdicts': after.get('guard_filter', {}).get('relevance_verdicts', 0)
+        - before.get('guard_filter', {}).get('relevance_verdicts', 0),
         'client_cpu_s': report['cpu_s'], 'client_maxrss_mb': report['maxrss_kb'] / 1024,
         'client_rss_ready_mb': phase['ready']['rss_kb'] / 1024,
         'client_rss_end_mb': report['rss_kb'] / 1024,
@@ -333,8 +333,8 @@ ROWS: tuple[tuple[str, str, str], ...] = (
     ('filter updates (`feedback_filter_state.updates`)', 'updates', 'd'),
     ('reader-filter calls at the server (process_reader_filter_info), run / total', 'events',
      ''),
-    ('filters of the library\'s class the server guard created, run / total', 'compiled', ''),
-    ('verdicts the guard gave from the goal UUID', 'guard_uuid_verdicts', 'd'),
+    ('readers of the library\'s class the server guard keeps, run / total', 'compiled', ''),
+    ('verdicts the guard gave for them (is_relevant)', 'guard_uuid_verdicts', 'd'),
     ('client CPU s (user+sys, go to end)', 'client_cpu_s', '.1f'),
     ('client peak RSS MB (ru_maxrss)', 'client_maxrss_mb', '.0f'),
     ('client RSS MB before go', 'client_rss_ready_mb', '.0f'),
