@@ -101,6 +101,7 @@ def run_handler(kind: str, watched: list[str], extra: str) -> None:
     rclpy.init()
     node = Node(f'demo_handler_{kind}')
     from cft_action.parameter_events import ParameterEventHandler as Filtered
+    from harness.ros import leave_spinning_process
     from rclpy.parameter_event_handler import ParameterEventHandler as Plain
     handler = (Filtered if kind == 'filtered' else Plain)(node)
     counts = {'received': 0, 'callbacks': 0}
@@ -123,7 +124,8 @@ def run_handler(kind: str, watched: list[str], extra: str) -> None:
 
     executor = SingleThreadedExecutor()
     executor.add_node(node)
-    threading.Thread(target=executor.spin, daemon=True).start()
+    spinner = threading.Thread(target=executor.spin, daemon=True)
+    spinner.start()
     print('READY', flush=True)
     deadline = time.monotonic() + 30
     while seen != set(watched) and time.monotonic() < deadline:
@@ -162,10 +164,10 @@ def run_handler(kind: str, watched: list[str], extra: str) -> None:
                 time.sleep(period)
                 print(f'STEP {handler.parameter_event_filter_state.updates - before}', flush=True)
             print(f'SOAKED {handler.parameter_event_filter_state.updates - before}', flush=True)
-    executor.shutdown(timeout_sec=5)
-    handler.destroy()
-    node.destroy_node()
-    rclpy.shutdown()
+    def destroy() -> None:
+        handler.destroy()
+        node.destroy_node()
+    leave_spinning_process(executor, [spinner], destroy)  # else it aborts at exit
 
 
 # --- the demo -----------------------------------------------------------------------------------
