@@ -1,8 +1,8 @@
 """The one module that touches rclpy's private names checks them, and names what is missing."""
 
 import pathlib
-import time
 import re
+import time
 
 import pytest
 from rclpy.node import Node
