@@ -24,8 +24,7 @@ import time
 from typing import Any, Callable, NamedTuple, Optional
 
 from rclpy.node import Node
-from rclpy.qos import (DurabilityPolicy, HistoryPolicy, qos_profile_services_default, QoSProfile,
-                       ReliabilityPolicy)
+from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.task import Future
 from unique_identifier_msgs.msg import UUID
 
@@ -208,9 +207,12 @@ class ActionClient(CompatActionClient):
             filter_class=filter_class_for(writer_filtering, _rcl.UUID_FILTER_CLASS))
         self._reader = self._filter.reader
         self._cft_action_name = action_name
-        self._cancel_qos = kwargs.get('cancel_service_qos_profile', qos_profile_services_default)
+        services = _deep_service_queues(kwargs)
+        # The arrival probe's cancel client has the cancel service's profile: a probe's reply among
+        # many clients' cancel replies must not fall out of a shallower queue.
+        self._cancel_qos = services['cancel_service_qos_profile']
         super().__init__(node, action_type, action_name, request_lock=self._reader.lock,
-                         **_deep_service_queues(kwargs))  # _cft_before_first_wait
+                         **services)  # _cft_before_first_wait
         if not self._filter.installed:
             self._reader.fall_back('rclpy did not add the client through Node.add_waitable')
             self._assemble()
