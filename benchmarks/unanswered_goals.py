@@ -166,6 +166,10 @@ def role_client(action: str, config: str, goals: int, depth: str, spin: str,
     # Stay until told to go, so that a stuck client can be inspected (gdb -p).
     sys.stdin.readline()
     executor.shutdown(timeout_sec=2)
+    if spinner is not None:
+        # A daemon spinner still inside rclpy when the interpreter finalizes aborts the process
+        # (std::terminate): it ends first.
+        spinner.join(timeout=5)
     return 0
 
 
