@@ -13,7 +13,8 @@ in that mode), each sending one goal, and ``--plain-clients`` plain client proce
 ``--goals`` goals each, all at ``go``. The observers run at the same time, so they receive the
 same status samples: their CPU (user + system, from ``go`` until the server has accepted and
 finished every goal and no client's counters moved for 1.5 s) is compared within the round, as a
-ratio to the plain observer's. Each observer also reports the status samples and goal entries
+ratio to the plain observer's, with the part of it that Fast DDS's threads spent (receiving,
+whatever Python takes). Each observer also reports the status samples and goal entries
 that reached Python (``take_data``'s ``status``), and the library's ``goal_status_state``: the
 entries the samples listed, and those it converted.
 
@@ -130,6 +131,14 @@ def run_round(args: argparse.Namespace, server_kind: str, domain: int) -> dict[s
                           for config, report in reports.items()}}
 
 
+def fast_dds_cpu_s(report: dict[str, Any]) -> Optional[float]:
+    """The CPU seconds of a client's Fast DDS threads (``dds.*``: receive, events, flow control),
+    the rest being Python's; None in results from before they were recorded."""
+    threads = report.get('thread_cpu_s')
+    return None if threads is None else sum(
+        s for name, s in threads.items() if name.startswith('dds.'))
+
+
 def table(result: dict[str, Any]) -> str:
     """Per server kind and configuration: the observer's CPU over the rounds, and its ratio."""
     rows = []
@@ -141,18 +150,21 @@ def table(result: dict[str, Any]) -> str:
             cpu = [r['observers'][config]['cpu_s'] for r in rounds]
             ratios = [c / p for c, p in zip(cpu, plain) if p] if plain else []
             first = rounds[0]['observers'][config] if rounds else {}
+            dds = [fast_dds_cpu_s(r['observers'][config]) for r in rounds]
             rows.append([
                 kind, load.CONFIG_LABELS[config], ' / '.join(f'{c:.2f}' for c in cpu),
+                ' / '.join(fmt(d, '.2f') for d in dds),
                 fmt(statistics.median(ratios) if ratios else None, '.2f') + 'x',
                 ' / '.join(f'{r:.2f}' for r in ratios),
                 fmt(first.get('status'), 'd'), fmt(first.get('status_entries'), 'd'),
                 fmt(first.get('status_entries_listed'), 'd'),
                 ' / '.join(f"{r['goals_s']:.0f}" for r in rounds)])
     return '\n'.join(markdown_table(
-        ['server', 'observer', 'CPU s per round', 'median ratio to plain', 'ratios',
+        ['server', 'observer', 'CPU s per round', 'of it, Fast DDS threads',
+         'median ratio to plain', 'ratios',
          'status samples to Python (round 1)', 'entries to Python (round 1)',
          'entries listed (round 1)', 'goals took s'], rows,
-        ['---', '---'] + ['---:'] * 7))
+        ['---', '---'] + ['---:'] * 8))
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

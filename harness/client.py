@@ -28,7 +28,8 @@ What it counts, from ``go`` on:
   writer filtered out is not counted and one that rclpy drops later is.
 - ``callbacks``: feedback that reached a user callback, with ``latency_us`` from the server's
   publish time in the message to the callback.
-- ``cpu_s``: user + system seconds of this process, all threads.
+- ``cpu_s``: user + system seconds of this process, all threads; ``thread_cpu_s``: the same by
+  thread name (:func:`harness.procstat.thread_cpu_s`: Python's against Fast DDS's threads).
 - ``status``, ``status_entries``, ``status_max_entries`` and ``status_cdr_bytes``: status messages
   (``GoalStatusArray``) taken from rcl, the goal entries they listed, the most in one, and their
   serialized size (:func:`status_array_size`; no headers). The status reader keeps the last sample
@@ -205,6 +206,7 @@ class LoadClient:
         self.last_response_s: Optional[float] = None
         self.last_callback_s: Optional[float] = None
         self.start_cpu = 0.0
+        self.start_threads: dict[str, float] = {}
         self.start_counters: dict[str, Any] = {}
         self.start_status: dict[str, int] = {}
         self.started = 0.0
@@ -228,6 +230,7 @@ class LoadClient:
         With an interval, send the first now and the others from a timer, one per interval.
         """
         self.start_cpu = cpu_seconds()
+        self.start_threads = procstat.thread_cpu_s(os.getpid())
         self.start_counters = filter_counters(self.client)
         self.start_status = dict(self.client.status_counts)
         self.client.status_max_entries = 0
@@ -286,6 +289,8 @@ class LoadClient:
         return {**self.progress(), 'goals': self.goals, 'order': self.order,
                 'accepted': len(self.handles), 'rejected': self.rejected,
                 'misrouted': self.misrouted, 'cpu_s': cpu_seconds() - self.start_cpu,
+                'thread_cpu_s': {name: round(s - self.start_threads.get(name, 0.0), 3) for name, s
+                                 in procstat.thread_cpu_s(os.getpid()).items()},
                 'status_max_entries': self.client.status_max_entries,
                 'send_s': self.send_s, 'last_response_s': self.last_response_s,
                 'last_callback_s': self.last_callback_s, **memory_kb(),
