@@ -57,6 +57,9 @@ from harness.status_model import (INFO_DST, MESSAGES_PER_GOAL, STATUS_ENTRY, WIR
 
 REPO = Path(__file__).resolve().parent.parent
 
+#: The grid's server kinds: under ``cft-action guard`` or not.
+SERVERS = {'guarded': 'under cft-action guard', 'unguarded': 'without the guard'}
+
 #: Longest wait for the probe goals to expire before a phase's ``go``: with a longer
 #: result_timeout they stay, and the model counts them as held.
 PROBE_WAIT_MAX_S = 10
@@ -103,6 +106,8 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--configs', type=name_list(load.CONFIG_LABELS),
                         default=['rclpy', 'client'],
                         help='grid: comma-separated, from: ' + ', '.join(load.CONFIG_LABELS))
+    parser.add_argument('--servers', type=name_list(SERVERS), default=['guarded'],
+                        help='grid: comma-separated server kinds, from: ' + ', '.join(SERVERS))
     parser.add_argument('--timeouts', type=int_list, default=[2, 10, 60, 900],
                         help='timeouts: the server\'s result_timeout values, s')
     parser.add_argument('--timeout-configs', type=name_list(load.CONFIG_LABELS), default=['client'],
@@ -135,8 +140,9 @@ def points(args: argparse.Namespace) -> list[tuple[str, load.LoadSpec, list[str]
     if 'grid' in args.parts:
         grid = sorted(((n, m) for n in args.clients for m in args.goals),
                       key=lambda nm: (nm[0] * nm[1]) ** 2 * nm[0])
-        out += [('grid', load.LoadSpec(clients=n, goals=m, **common), args.configs)
-                for n, m in grid]
+        out += [('grid', load.LoadSpec(clients=n, goals=m, guarded=server == 'guarded',
+                                       **common), args.configs)
+                for n, m in grid for server in args.servers]
     if 'timeouts' in args.parts:
         clients, goals, interval = args.arrivals
         out += [('timeouts', load.LoadSpec(clients=clients, goals=goals, result_timeout_s=t,
@@ -248,7 +254,8 @@ def run(args: argparse.Namespace) -> Path:
 
     todo = points(args)
     for i, (part, spec, configs) in enumerate(todo, 1):
-        progress(f'point {i}/{len(todo)} ({part}): N={spec.clients} M={spec.goals} '
+        progress(f'point {i}/{len(todo)} ({part}, {"" if spec.guarded else "un"}guarded): '
+                 f'N={spec.clients} M={spec.goals} '
                  f'result_timeout={spec.result_timeout_s} s interval={spec.goal_interval_s:g} s; '
                  f'load average {os.getloadavg()[0]:.2f}')
         point: dict[str, Any] = {'part': part, 'load_average_start': os.getloadavg()}
@@ -291,7 +298,7 @@ def _vs(model: str) -> Callable[[dict[str, Any], dict[str, Any]], str]:
     return cell
 
 
-_CONFIG: Column = ('configuration', lambda p, ph: load.CONFIG_LABELS[ph['config']])
+_CONFIG: Column = ('configuration', lambda p, ph: load.phase_label(ph))
 _GOALS: Column = ('goals', lambda p, ph: str(p['spec']['clients'] * p['spec']['goals']))
 _STATUS: list[Column] = [
     ('status kB/client', _figure('status_bytes', '.1f', 1e-3)),
