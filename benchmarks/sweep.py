@@ -74,6 +74,10 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--guard', choices=('on', 'off'), default='on',
                         help="'off': the server runs without `cft-action guard`, as the server of "
                              'someone who only swapped a client import')
+    parser.add_argument('--server-feedback-depth', type=int, default=None,
+                        help="the server's feedback writer alone keeps this many samples (rclpy's "
+                             'default: 10); default: as deep as every queue, which holds all of a '
+                             "phase's feedback")
     parser.add_argument('--drain-timeout', type=float, default=300.0,
                         help='seconds a phase may take after its goals finished')
     parser.add_argument('--goals-timeout', type=float, default=None,
@@ -134,7 +138,8 @@ def run(args: argparse.Namespace) -> Path:
             clients=point['clients'], goals=point['goals'], rate_hz=point['rate_hz'],
             order=max(1, round(args.duration * point['rate_hz'])), pad=SIZES[point['size']],
             network=args.network, drain_timeout=args.drain_timeout,
-            goals_timeout=args.goals_timeout, guarded=args.guard == 'on')
+            goals_timeout=args.goals_timeout, guarded=args.guard == 'on',
+            server_feedback_depth=args.server_feedback_depth)
         progress(f'point {i}/{len(points)}: N={spec.clients} M={spec.goals} '
                  f'{spec.rate_hz:g} Hz {point["size"]}')
         point_started = time.monotonic()

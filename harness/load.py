@@ -99,6 +99,8 @@ class LoadSpec:
         message); see :data:`RESULT_TIMEOUT_S`.
     :ivar goal_interval_s: 0: each client sends its goals at once on ``go``; else one every this
         many seconds.
+    :ivar server_feedback_depth: the server's feedback writer alone keeps this many samples
+        (rclpy's default is 10); None: as every queue (:func:`queue_depth`).
     """
 
     clients: int = 8
@@ -115,6 +117,7 @@ class LoadSpec:
     bystanders: int = 0
     result_timeout_s: int = RESULT_TIMEOUT_S
     goal_interval_s: float = 0.0
+    server_feedback_depth: Optional[int] = None
 
     @property
     def total_goals(self) -> int:
@@ -214,6 +217,8 @@ class LoadRun:
                                  f'no network namespaces ({reason})')
         argv = python_module('harness.server', self.action, 1.0 / spec.rate_hz, '--pad', spec.pad,
                              '--depth', self.depth, '--result-timeout', spec.result_timeout_s)
+        if spec.server_feedback_depth is not None:
+            argv += ['--feedback-depth', str(spec.server_feedback_depth)]
         if self.topology:
             argv = self.topology.command(self.topology.server, argv)
         server_env = {**self.env, **spec.server_env}

@@ -28,7 +28,8 @@ Execute callbacks are coroutines, so one single-threaded executor serves any num
 Queues: ``--depth N`` makes every queue keep-last N, reliable; ``--depth all`` keep-all (with a
 1000-sample resource hint), which tests use so that nothing is dropped on a loaded machine; without
 ``--depth``, rclpy's defaults (keep-last 10), as an ordinary server has. ``--goal-depth N`` makes
-the goal service alone keep-last N, reliable.
+the goal service alone keep-last N, reliable, and ``--feedback-depth N`` the feedback writer alone
+(rclpy's default is 10: a writer whose history is full heartbeats every reader at each write).
 
 Lines it prints: ``STATUS <guard active> <guard status>`` and ``READY`` at start; ``STATS <json>``
 in reply to the command ``stats`` on stdin, and every ``--stats-every`` seconds if given (a crash
@@ -214,7 +215,7 @@ class TickingServer:
                  result_timeout: int = DEFAULT_RESULT_TIMEOUT_S,
                  late_feedback: float = 0.0, goal_depth: Optional[int] = None,
                  hold_goals: int = 0, record_readers: bool = False,
-                 mute_cancel: bool = False) -> None:
+                 mute_cancel: bool = False, feedback_depth: Optional[int] = None) -> None:
         """Create the action server on ``node`` and start the ticker thread."""
         self.executor = executor
         self.started = time.monotonic()
@@ -246,6 +247,9 @@ class TickingServer:
         if goal_depth is not None:
             qos['goal_service_qos_profile'] = QoSProfile(
                 depth=goal_depth, reliability=ReliabilityPolicy.RELIABLE)
+        if feedback_depth is not None:
+            qos['feedback_pub_qos_profile'] = QoSProfile(
+                depth=feedback_depth, reliability=ReliabilityPolicy.RELIABLE)
         self.server = CountingActionServer(
             node, Fibonacci, action, execute_callback=self.execute, goal_callback=self.on_goal,
             cancel_callback=lambda _: CancelResponse.ACCEPT,
@@ -388,6 +392,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
                         help='SingleThreadedExecutor (default) or MultiThreadedExecutor')
     parser.add_argument('--goal-depth', type=int,
                         help="the goal service's depth alone (keep-last, reliable)")
+    parser.add_argument('--feedback-depth', type=int,
+                        help="the feedback writer's depth alone (keep-last, reliable)")
     parser.add_argument('--record-readers', action='store_true',
                         help='record the feedback readers in the graph when each goal is taken '
                              '(command readers)')
@@ -409,7 +415,8 @@ def main(argv: list[str]) -> None:
     executor.add_node(node)
     server = TickingServer(node, executor, args.action, args.period, args.pad, args.depth,
                            args.result_timeout, args.late_feedback, args.goal_depth,
-                           args.hold_goals, args.record_readers, args.mute_cancel)
+                           args.hold_goals, args.record_readers, args.mute_cancel,
+                           args.feedback_depth)
     # The RTPS GUIDs of the feedback and status writers, to tell their packets apart on the wire.
     writers = {name: [bytes(info.endpoint_gid).hex() for info in
                       node.get_publishers_info_by_topic(f'{args.action}/_action/{name}')]
