@@ -133,7 +133,8 @@ setup(
         Extension(
             'cft_action._cftguard',
             sources=['cft_action/_guard.c', 'cft_action/_guard_filter.c',
-                     'cft_action/_guard_writer_qos.c', 'cft_action/_guard_log.c',
+                     'cft_action/_guard_writer_qos.c', 'cft_action/_guard_heartbeats.c',
+                     'cft_action/_guard_log.c',
                      'cft_action/_filter_class.c', 'cft_action/_uuid_program.c',
                      'cft_action/_node_program.c'],
             libraries=['dl', 'pthread'],

@@ -217,6 +217,30 @@ def writer_limits() -> dict[str, int]:
     return _counters('cft_guard_writer_qos_count', WRITER_QOS_COUNTERS)
 
 
+#: The counters of cft_guard_heartbeat_count() in _guard_heartbeats.c, in its order.
+HEARTBEAT_COUNTERS = ('narrowed', 'widened', 'gaps_deferred', 'gaps_passed')
+
+
+def heartbeat_counts() -> dict[str, int]:
+    """Return what the guard did with its writers' HEARTBEATs and GAPs to filtered readers.
+
+    A Fast DDS 2.14 writer heartbeats every reader at each write while its history is full (rclpy's
+    default keep-last 10 nearly always is), and 2.14.6 also sends each filtered reader a GAP at
+    each write it is not in: a datagram per sample to readers that receive none of it. The guard
+    lets the HEARTBEAT to all readers through at most once per ``CFT_GUARD_HEARTBEAT_ALL_MS``
+    (default 10; ``off``: as Fast DDS) per writer, and leaves those GAPs to the reader's next
+    sample, NACK or periodic heartbeat (``CFT_GUARD_DEFER_GAPS=0``: as Fast DDS). Keys:
+
+    - ``narrowed``: piggyback HEARTBEATs that went to the DATA's readers only;
+    - ``widened``: those let through to all readers;
+    - ``gaps_deferred``: per-write GAPs left for later (0 on 2.14.5, which sends none);
+    - ``gaps_passed``: GAPs of the other kinds, sent as Fast DDS sends them.
+
+    An empty dict when the guard is not preloaded.
+    """
+    return _counters('cft_guard_heartbeat_count', HEARTBEAT_COUNTERS)
+
+
 def environment(env: Optional[Mapping[str, str]] = None) -> dict[str, str]:
     """Return a copy of ``env`` (default: ``os.environ``) with the guard first in ``LD_PRELOAD``.
 

@@ -41,6 +41,7 @@ from typing import Any, Iterator, Optional
 CATEGORIES = ('feedback data', 'feedback gap/heartbeat', 'status', 'discovery', 'other')
 
 _DATA, _DATA_FRAG = 0x15, 0x16
+_HEARTBEAT, _GAP = 0x07, 0x08
 # HEARTBEAT, GAP, HEARTBEAT_FRAG, ACKNACK and NACK_FRAG carry readerId, then writerId.
 _WRITER_AFTER_READER = (0x07, 0x08, 0x13, 0x06, 0x12)
 
@@ -223,6 +224,48 @@ def data_by_port(interface: str, writers: set[bytes], stop: threading.Event,
         for writer, sequence, signatures in filter_signatures(frame[14 + header + 8:]):
             if writer in writers:
                 found.setdefault(port, {})[sequence] = signatures
+    sock.close()
+    return found
+
+
+def writer_datagrams_by_port(interface: str, writers: set[bytes], stop: threading.Event,
+                             listening: threading.Event) -> dict[int, Counter[str]]:
+    """The datagrams that name one of ``writers`` received on ``interface`` until ``stop`` is set,
+    by UDP destination port (one port per reader's participant) and by what they carry of those
+    writers: ``data`` (a DATA or DATA_FRAG, whatever else), ``heartbeat`` (HEARTBEATs only),
+    ``gap`` (GAPs only) or ``gap+heartbeat``. Sets ``listening`` once the socket is bound.
+    Unfragmented IPv4 datagrams only."""
+    sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(3))  # ETH_P_ALL
+    sock.bind((interface, 0))
+    sock.settimeout(0.2)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 * 1024 * 1024)
+    found: dict[int, Counter[str]] = {}
+    listening.set()
+    while not stop.is_set():
+        try:
+            frame, address = sock.recvfrom(65535)
+        except socket.timeout:
+            continue
+        if address[2] == socket.PACKET_OUTGOING or frame[12:14] != b'\x08\x00' or frame[23] != 17:
+            continue
+        header = (frame[14] & 0x0f) * 4
+        payload = frame[14 + header + 8:]
+        if payload[:4] != b'RTPS':
+            continue
+        prefix = payload[8:20]
+        kinds = {kind for kind, entity, _ in _writer_ids(payload) if prefix + entity in writers}
+        if not kinds:
+            continue
+        if kinds & {_DATA, _DATA_FRAG}:
+            what = 'data'
+        elif kinds == {_HEARTBEAT}:
+            what = 'heartbeat'
+        elif kinds == {_GAP}:
+            what = 'gap'
+        else:
+            what = 'gap+heartbeat'
+        port = struct.unpack('!H', frame[14 + header + 2:14 + header + 4])[0]
+        found.setdefault(port, Counter())[what] += 1
     sock.close()
     return found
 

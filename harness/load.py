@@ -369,8 +369,8 @@ class LoadRun:
             'server_cpu_goals_s': done['cpu_s'] - before['cpu_s'],
             'published_at_goals': done['published'] - before['published'],
             'timed_out': done.get('timed_out', False),
-            'guard_filter': {k: v - before.get('guard_filter', {}).get(k, 0)
-                             for k, v in after.get('guard_filter', {}).items()},
+            **{key: {k: v - before.get(key, {}).get(k, 0) for k, v in after.get(key, {}).items()}
+               for key in ('guard_filter', 'guard_heartbeats')},
             'late_ticks': after['late_ticks'] - before['late_ticks'],
             'intervals': after['intervals'] - before['intervals'],
             'interval_s': after['interval_s'] - before['interval_s'],

@@ -372,7 +372,8 @@ class TickingServer:
                     'interval_s': self.interval_s, 'cpu_s': usage.ru_utime + usage.ru_stime,
                     'guard': guard.status(), 'guard_calls': guard.call_counts(),
                     'guard_filter': guard.filter_counts(), 'guard_writers': guard.writer_limits(),
-                    'guard_filter_class': guard.filter_class_counts()}
+                    'guard_filter_class': guard.filter_class_counts(),
+                    'guard_heartbeats': guard.heartbeat_counts()}
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:

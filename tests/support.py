@@ -39,17 +39,19 @@ def helper_process(module: str, args: Sequence[object] = (), *, env: Optional[di
 
 def action_server(action: str, period: float, *, env: Optional[dict] = None,
                   late_feedback: float = 0.0, mute_cancel: bool = False,
-                  timeout: float = 30.0) -> Proc:
+                  feedback_depth: Optional[int] = None, timeout: float = 30.0) -> Proc:
     """The project's Fibonacci action server (:mod:`harness.server`) with keep-all queues.
 
     rclpy's default depth of 10 drops requests when many clients send goals at once (measured:
     4 of 15 goals lost with 3 clients), and any keep-last queue drops when a client on a loaded
     machine lags: these tests are about filtering, so every queue keeps all. ``late_feedback``
-    and ``mute_cancel``: see the server's ``--late-feedback`` and ``--mute-cancel``.
+    and ``mute_cancel``: see the server's ``--late-feedback`` and ``--mute-cancel``;
+    ``feedback_depth``: the feedback writer alone keeps that many (``--feedback-depth``).
     """
     argv = python_module('harness.server', action, period, '--depth', 'all',
                          '--late-feedback', late_feedback,
-                         *(['--mute-cancel'] if mute_cancel else []))
+                         *(['--mute-cancel'] if mute_cancel else []),
+                         *(['--feedback-depth', feedback_depth] if feedback_depth else []))
     return _started(Proc('server', argv, env or os.environ.copy()), 'READY', timeout)
 
 
