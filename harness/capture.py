@@ -200,31 +200,42 @@ def capture(interface: str, feedback: set[bytes], status: set[bytes],
     return counts
 
 
+def _received_udp(interface: str, stop: threading.Event,
+                  listening: threading.Event) -> Iterator[tuple[int, bytes]]:
+    """(UDP destination port, UDP payload) of each unfragmented IPv4 datagram received on
+    ``interface`` until ``stop`` is set; sets ``listening`` once the socket is bound."""
+    sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(3))  # ETH_P_ALL
+    sock.bind((interface, 0))
+    sock.settimeout(0.2)
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 * 1024 * 1024)
+    listening.set()
+    try:
+        while not stop.is_set():
+            try:
+                frame, address = sock.recvfrom(65535)
+            except socket.timeout:
+                continue
+            if (address[2] == socket.PACKET_OUTGOING or frame[12:14] != b'\x08\x00'
+                    or frame[23] != 17):
+                continue
+            header = (frame[14] & 0x0f) * 4
+            yield (struct.unpack('!H', frame[14 + header + 2:14 + header + 4])[0],
+                   frame[14 + header + 8:])
+    finally:
+        sock.close()
+
+
 def data_by_port(interface: str, writers: set[bytes], stop: threading.Event,
                  listening: threading.Event) -> dict[int, dict[int, Optional[int]]]:
     """The DATA submessages of ``writers`` received on ``interface`` until ``stop`` is set, by UDP
     destination port (one port per reader's participant): sequence number -> the number of filter
     signatures it carried (None: no ``PID_CONTENT_FILTER_INFO``; a repair counts once, the last
     copy). Sets ``listening`` once the socket is bound. Unfragmented IPv4 datagrams only."""
-    sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(3))  # ETH_P_ALL
-    sock.bind((interface, 0))
-    sock.settimeout(0.2)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 * 1024 * 1024)
     found: dict[int, dict[int, Optional[int]]] = {}
-    listening.set()
-    while not stop.is_set():
-        try:
-            frame, address = sock.recvfrom(65535)
-        except socket.timeout:
-            continue
-        if address[2] == socket.PACKET_OUTGOING or frame[12:14] != b'\x08\x00' or frame[23] != 17:
-            continue
-        header = (frame[14] & 0x0f) * 4
-        port = struct.unpack('!H', frame[14 + header + 2:14 + header + 4])[0]
-        for writer, sequence, signatures in filter_signatures(frame[14 + header + 8:]):
+    for port, payload in _received_udp(interface, stop, listening):
+        for writer, sequence, signatures in filter_signatures(payload):
             if writer in writers:
                 found.setdefault(port, {})[sequence] = signatures
-    sock.close()
     return found
 
 
@@ -235,21 +246,8 @@ def writer_datagrams_by_port(interface: str, writers: set[bytes], stop: threadin
     writers: ``data`` (a DATA or DATA_FRAG, whatever else), ``heartbeat`` (HEARTBEATs only),
     ``gap`` (GAPs only) or ``gap+heartbeat``. Sets ``listening`` once the socket is bound.
     Unfragmented IPv4 datagrams only."""
-    sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(3))  # ETH_P_ALL
-    sock.bind((interface, 0))
-    sock.settimeout(0.2)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 * 1024 * 1024)
     found: dict[int, Counter[str]] = {}
-    listening.set()
-    while not stop.is_set():
-        try:
-            frame, address = sock.recvfrom(65535)
-        except socket.timeout:
-            continue
-        if address[2] == socket.PACKET_OUTGOING or frame[12:14] != b'\x08\x00' or frame[23] != 17:
-            continue
-        header = (frame[14] & 0x0f) * 4
-        payload = frame[14 + header + 8:]
+    for port, payload in _received_udp(interface, stop, listening):
         if payload[:4] != b'RTPS':
             continue
         prefix = payload[8:20]
@@ -264,9 +262,7 @@ def writer_datagrams_by_port(interface: str, writers: set[bytes], stop: threadin
             what = 'gap'
         else:
             what = 'gap+heartbeat'
-        port = struct.unpack('!H', frame[14 + header + 2:14 + header + 4])[0]
         found.setdefault(port, Counter())[what] += 1
-    sock.close()
     return found
 
 
