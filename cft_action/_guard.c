@@ -323,6 +323,16 @@ static inline struct family *ready(int fam) {
   return f;
 }
 
+void *cft_guard_real(void **cache, const char *soname, const char *name) {
+  void *p = __atomic_load_n(cache, __ATOMIC_ACQUIRE);
+  if (p != NULL) return p;
+  void *handle = dlopen(soname, RTLD_LAZY | RTLD_NOLOAD);
+  p = handle != NULL ? dlsym(handle, name) : NULL;
+  if (p == NULL) p = dlsym(RTLD_NEXT, name);
+  __atomic_store_n(cache, p, __ATOMIC_RELEASE);
+  return p;
+}
+
 int cft_guard_knows_fastdds2(void) {
   return __atomic_load_n(&ready(0)->state, __ATOMIC_ACQUIRE) == CFT_GUARD_ACTIVE;
 }

@@ -19,4 +19,10 @@
 // Decides the family's state if it is not decided yet: call it only once Fast DDS is loaded.
 int cft_guard_knows_fastdds2(void);
 
+// The definition of `name` in the loaded library `soname` (rmw loads Fast DDS and its own
+// libraries RTLD_LOCAL, outside the global scope), else the next one after the guard's; NULL if
+// there is none. Cached in *cache (release) on the first call; the library's handle is kept, since
+// the pointer must not outlive it.
+void *cft_guard_real(void **cache, const char *soname, const char *name);
+
 #endif  // CFT_ACTION_GUARD_H_

@@ -58,18 +58,6 @@ static unsigned long counters[COUNTERS];
 
 static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_RELAXED); }
 
-// ---- the real members ------------------------------------------------------------------------
-static void *find_real(void **cache, const char *name) {
-  void *p = __atomic_load_n(cache, __ATOMIC_ACQUIRE);
-  if (p != NULL) return p;
-  // Fast DDS is loaded RTLD_LOCAL by rmw, outside the global scope: ask the library itself.
-  void *handle = dlopen(FASTDDS2_SONAME, RTLD_LAZY | RTLD_NOLOAD);
-  p = handle != NULL ? dlsym(handle, name) : NULL;
-  if (p == NULL) p = dlsym(RTLD_NEXT, name);
-  __atomic_store_n(cache, p, __ATOMIC_RELEASE);
-  return p;  // the handle is kept on purpose: the pointer must not outlive the library
-}
-
 // ---- the callers -----------------------------------------------------------------------------
 // The call sites seen so far, and which caller each is in: a handful at most. A slot's `caller` is
 // written before its address is published (release), under sites_lock.
@@ -192,11 +180,12 @@ void cft_select_all_readers_nts2(void *self, void *group, void *locator_selector
     }
     count(WIDENED);
   }
-  select_all_fn real = (select_all_fn)find_real(&real_select_all, SELECT_ALL);
+  select_all_fn real =
+      (select_all_fn)cft_guard_real(&real_select_all, FASTDDS2_SONAME, SELECT_ALL);
   if (real != NULL) real(self, group, locator_selector);  // else unreachable: Fast DDS called us
 }
 
-// ---- 2. the per-write GAPs of 2.14.6 ----------------------------------------------------------------
+// ---- 2. the per-write GAPs of 2.14.6 -----------------------------------------------------------
 typedef void (*add_gaps_fn)(void *self, void *reader_proxy, void *group);
 static void *real_add_gaps;
 
@@ -207,21 +196,14 @@ void cft_add_gaps_for_removed_irrelevants2(void *self, void *reader_proxy, void 
     count(GAPS_DEFERRED);
     return;
   }
-  add_gaps_fn real = (add_gaps_fn)find_real(&real_add_gaps, ADD_GAPS);
+  add_gaps_fn real = (add_gaps_fn)cft_guard_real(&real_add_gaps, FASTDDS2_SONAME, ADD_GAPS);
   if (real == NULL) return;  // unreachable: only that Fast DDS calls this member
   count(GAPS_PASSED);
   real(self, reader_proxy, group);
 }
 
 // 0: piggyback HEARTBEATs kept to the DATA's readers; 1: let through to all readers;
-// 2: per-write GAPs left for later; 3: GAPs of the other kinds. Not counters (call them only once
-// Fast DDS is loaded: they decide): 4, the interval in ms (-1: off); 5, 1 when GAPs are deferred.
-CFT_EXPORT long cft_guard_heartbeat_count(int which) {
-  if (which >= 0 && which < COUNTERS) return (long)__atomic_load_n(&counters[which], __ATOMIC_RELAXED);
-  if (which == COUNTERS) {
-    long ns = heartbeat_all_ns();
-    return ns < 0 ? -1 : ns / 1000000L;
-  }
-  if (which == COUNTERS + 1) return gaps_deferred();
-  return 0;
+// 2: per-write GAPs left for later; 3: GAPs of the other kinds.
+CFT_EXPORT unsigned long cft_guard_heartbeat_count(int which) {
+  return which >= 0 && which < COUNTERS ? __atomic_load_n(&counters[which], __ATOMIC_RELAXED) : 0;
 }

@@ -71,7 +71,7 @@ typedef bool (*get_datawriter_qos_fn)(const void *profile, const void *type_hash
 
 enum { RAISED = 0, LEFT = 1, COUNTERS = 2 };
 static unsigned long counters[COUNTERS];
-static get_datawriter_qos_fn real_get_datawriter_qos;
+static void *real_get_datawriter_qos;  // cft_guard_real's cache
 static size_t wanted;  // 0 until read from the environment
 static char left_reason[256];
 
@@ -106,15 +106,8 @@ static size_t reader_filters_wanted(void) {
 }
 
 static get_datawriter_qos_fn find_real(void) {
-  get_datawriter_qos_fn real = __atomic_load_n(&real_get_datawriter_qos, __ATOMIC_ACQUIRE);
-  if (real != NULL) return real;
-  // rmw loads its libraries with RTLD_LOCAL, outside the global scope: ask the library itself.
-  void *handle = dlopen(RMW_SHARED_SONAME, RTLD_LAZY | RTLD_NOLOAD);
-  void *p = handle != NULL ? dlsym(handle, GET_DATAWRITER_QOS) : NULL;
-  if (p == NULL) p = dlsym(RTLD_NEXT, GET_DATAWRITER_QOS);
-  real = (get_datawriter_qos_fn)p;
-  __atomic_store_n(&real_get_datawriter_qos, real, __ATOMIC_RELEASE);
-  return real;  // the handle is kept on purpose: the pointer must not outlive the library
+  return (get_datawriter_qos_fn)cft_guard_real(&real_get_datawriter_qos,
+                                               RMW_SHARED_SONAME, GET_DATAWRITER_QOS);
 }
 
 static void raise_reader_filters(void *qos) {
