@@ -30,15 +30,23 @@ def rss_kb(pid: int) -> Optional[int]:
     return None
 
 
+def _stat(path: str) -> Optional[tuple[str, float]]:
+    """The name and the user + system seconds in a ``/proc/.../stat`` file, or None when it is
+    gone."""
+    try:
+        with open(path) as stat:
+            head, tail = stat.read().rsplit(')', 1)
+        fields = tail.split()
+        # After the command: state is field 3 of stat(5), utime 14 and stime 15.
+        return head.split('(', 1)[1], (int(fields[11]) + int(fields[12])) / _TICKS
+    except (OSError, ValueError, IndexError):
+        return None
+
+
 def cpu_s(pid: int) -> Optional[float]:
     """User + system seconds of ``pid`` so far, all threads, or None when it is gone."""
-    try:
-        with open(f'/proc/{pid}/stat') as stat:
-            fields = stat.read().rsplit(')', 1)[1].split()
-    except (OSError, IndexError):
-        return None
-    # After the command: state is field 3 of stat(5), utime 14 and stime 15.
-    return (int(fields[11]) + int(fields[12])) / _TICKS
+    found = _stat(f'/proc/{pid}/stat')
+    return None if found is None else found[1]
 
 
 def thread_cpu_s(pid: int) -> dict[str, float]:
@@ -51,14 +59,10 @@ def thread_cpu_s(pid: int) -> dict[str, float]:
     except OSError:
         return out
     for tid in tids:
-        try:
-            with open(f'/proc/{pid}/task/{tid}/stat') as stat:
-                head, tail = stat.read().rsplit(')', 1)
-        except (OSError, ValueError):
-            continue
-        name = re.sub(r'\d+', '#', head.split('(', 1)[1])
-        fields = tail.split()
-        out[name] = out.get(name, 0.0) + (int(fields[11]) + int(fields[12])) / _TICKS
+        found = _stat(f'/proc/{pid}/task/{tid}/stat')
+        if found is not None:
+            name = re.sub(r'\d+', '#', found[0])
+            out[name] = out.get(name, 0.0) + found[1]
     return out
 
 
