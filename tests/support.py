@@ -7,14 +7,16 @@ from __future__ import annotations
 
 import ctypes
 import importlib.metadata
+import json
 import os
 import re
 import shutil
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Any, Callable, NamedTuple, Optional, Sequence
 
 import pytest
 import rclpy
@@ -23,7 +25,7 @@ from test_msgs.action import Fibonacci
 from cft_action import guard
 from harness.crash import fastdds_library, live_backtrace
 from harness.proc import Proc, python_module
-from harness.ros import RosSession
+from harness.ros import RosSession, unique_name
 
 
 def helper_process(module: str, args: Sequence[object] = (), *, env: Optional[dict] = None,
@@ -280,3 +282,60 @@ def prove_parameter_events(ros: RosSession, handler: Any, nodes: Proc, names: Se
     assert handler.parameter_event_filter_state.updates == updates, 'the proof changed the filter'
     return (f'the event path of {sorted(names)} proven in {rounds} rounds, '
             f'{time.monotonic() - started:.3f} s')
+
+
+#: UDP only (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` with ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``:
+#: with ``LOCALHOST`` rmw_fastrtps adds shared memory, which carries the data past any capture).
+UDP_ONLY = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
+
+
+class WireRun(NamedTuple):
+    """What :func:`feedback_on_the_wire` saw: the clients' reports, in order; what ``capture``
+    returned for the server's feedback writer; the server's stats at ``go`` and at the end."""
+    reports: list[dict[str, Any]]
+    captured: dict[int, Any]
+    stats_at_go: dict[str, Any]
+    stats_after: dict[str, Any]
+
+
+def feedback_on_the_wire(clients: Sequence[tuple[str, str]], capture: Callable[..., dict],
+                         goals: int, order: int, *, server_env: Optional[dict] = None,
+                         feedback_depth: Optional[int] = None) -> WireRun:
+    """Run a guarded server and one client process (tests/helpers/fib_client.py) per (mode,
+    writer_filtering), all on UDP only, each sending ``goals`` goals of ``order`` feedback
+    messages; capture on loopback with ``capture(interface, {writer}, stop, listening)`` (from
+    :mod:`harness.capture`, root only) while they run."""
+    env = {**os.environ, **UDP_ONLY}
+    action = '/' + unique_name('cft_wire')
+    server = action_server(action, 0.01, env=guard.environment({**env, **(server_env or {})}),
+                           feedback_depth=feedback_depth)
+    stop, listening = threading.Event(), threading.Event()
+    captured: dict[int, Any] = {}
+    processes = []
+    sniffer = None
+    try:
+        writer = bytes.fromhex(server.request_json('stats', 'STATS')['writers']['feedback'][0])
+        # Each client proves its feedback path before READY; the capture starts after that, so
+        # it holds the measured goals' feedback only.
+        processes = [helper_process('tests.helpers.fib_client',
+                                    [action, mode, goals, order, filtering], env=env)
+                     for mode, filtering in clients]
+        sniffer = threading.Thread(target=lambda: captured.update(
+            capture('lo', {writer}, stop, listening)))
+        sniffer.start()
+        assert listening.wait(10)
+        at_go = server.request_json('stats', 'STATS')
+        for process in processes:
+            process.send('go')
+        reports = [json.loads(process.expect('RESULT', timeout=90).split(' ', 1)[1])
+                   for process in processes]
+        after = server.request_json('stats', 'STATS')
+        assert server.poll() is None, f'server died\n{server.tail()}'
+    finally:
+        stop.set()
+        if sniffer is not None:
+            sniffer.join(timeout=10)  # it fills captured as it ends
+        for process in processes:
+            process.stop()
+        server.stop()
+    return WireRun(reports, captured, at_go, after)

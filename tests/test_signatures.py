@@ -16,58 +16,24 @@ socket (root) reads the feedback writer's DATA submessages (:func:`harness.captu
 
 from __future__ import annotations
 
-import json
 import os
-import threading
 
 import pytest
 
-from cft_action import _rcl, guard
+from cft_action import _rcl
 from harness.capture import data_by_port
 from harness.ros import unique_name
-from tests.support import action_server, helper_process
+from tests.support import feedback_on_the_wire
 from tests.test_action_client import start_server
 
 GOALS, ORDER = 2, 20
-UDP_ONLY = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4', 'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
-
 pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='a raw socket needs root')
 
 
-def feedback_on_the_wire(clients: list[tuple[str, str]], server_env: dict[str, str]):
-    """Run a guarded server and one client process per (mode, writer_filtering); return the
-    clients' reports, in order, and the feedback writer's DATA by destination port."""
-    env = {**os.environ, **UDP_ONLY}
-    action = '/' + unique_name('cft_signatures')
-    server = action_server(action, 0.01, env=guard.environment({**env, **server_env}))
-    stop, listening = threading.Event(), threading.Event()
-    captured: dict[int, dict[int, object]] = {}
-    processes = []
-    sniffer = None
-    try:
-        writer = bytes.fromhex(server.request_json('stats', 'STATS')['writers']['feedback'][0])
-        # Each client proves its feedback path before READY; the capture starts after that, so
-        # it holds the measured goals' feedback only.
-        processes = [helper_process('tests.helpers.fib_client',
-                                    [action, mode, GOALS, ORDER, filtering], env=env)
-                     for mode, filtering in clients]
-        sniffer = threading.Thread(target=lambda: captured.update(
-            data_by_port('lo', {writer}, stop, listening)))
-        sniffer.start()
-        assert listening.wait(10)
-        for process in processes:
-            process.send('go')
-        reports = [json.loads(process.expect('RESULT', timeout=90).split(' ', 1)[1])
-                   for process in processes]
-        assert server.poll() is None, f'server died\n{server.tail()}'
-        return reports, captured
-    finally:
-        stop.set()
-        if sniffer is not None:
-            sniffer.join(timeout=10)  # it fills captured as it ends
-        for process in processes:
-            process.stop()
-        server.stop()
+def data_on_the_wire(clients: list[tuple[str, str]], server_env: dict[str, str]):
+    """The clients' reports, and the feedback writer's DATA by destination port."""
+    run = feedback_on_the_wire(clients, data_by_port, GOALS, ORDER, server_env=server_env)
+    return run.reports, run.captured
 
 
 def assert_own_feedback_only(reports, captured, filtered: int) -> None:
@@ -82,7 +48,7 @@ def assert_own_feedback_only(reports, captured, filtered: int) -> None:
 
 def test_no_signature_for_the_library_classes() -> None:
     """Two clients of each mode and a plain one, on one server."""
-    reports, captured = feedback_on_the_wire([('client', 'guarded'), ('client', 'guarded'),
+    reports, captured = data_on_the_wire([('client', 'guarded'), ('client', 'guarded'),
                                               ('goals', 'guarded'), ('goals', 'guarded'),
                                               ('rclpy', 'guarded')], {})
     assert_own_feedback_only(reports, captured, filtered=4)
@@ -99,7 +65,7 @@ def test_no_signature_for_the_library_classes() -> None:
 def test_a_dds_sql_filter_keeps_its_signature() -> None:
     """Beside a reader of the library's class, a DDS-SQL reader is Fast DDS's: every DATA, to
     every reader, carries exactly its one signature."""
-    reports, captured = feedback_on_the_wire([('client', 'any'), ('client', 'guarded'),
+    reports, captured = data_on_the_wire([('client', 'any'), ('client', 'guarded'),
                                               ('rclpy', 'guarded')], {})
     assert_own_feedback_only(reports, captured, filtered=2)
     signatures = {s for samples in captured.values() for s in samples.values()}
@@ -110,7 +76,7 @@ def test_fastdds_signatures_when_the_guard_leaves_the_readers_to_it() -> None:
     """``CFT_GUARD_KEEP_READERS=0`` (the benchmarks' comparison): Fast DDS keeps the readers of
     the library's class, and every DATA carries both their signatures, as before the guard kept
     them. The capture would see a signature if there were one."""
-    reports, captured = feedback_on_the_wire([('client', 'guarded'), ('client', 'guarded'),
+    reports, captured = data_on_the_wire([('client', 'guarded'), ('client', 'guarded'),
                                               ('rclpy', 'guarded')],
                                              {'CFT_GUARD_KEEP_READERS': '0'})
     assert_own_feedback_only(reports, captured, filtered=2)
