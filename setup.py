@@ -150,7 +150,7 @@ setup(
                      'cft_action/_writer_marks.c', 'cft_action/_patch.c',
                      'cft_action/_filter_class.c',
                      'cft_action/_uuid_program.c', 'cft_action/_node_program.c',
-                     'cft_action/_status_trim.c'],
+                     'cft_action/_status_trim.c', 'cft_action/_response_filter.c'],
             libraries=['dl', 'pthread'],
             extra_compile_args=['-O2', '-fvisibility=hidden', '-Wall'],
         ),

@@ -16,7 +16,8 @@ finished every goal and no client's counters moved for 1.5 s) is compared within
 ratio to the plain observer's, with the part of it that Fast DDS's threads spent (receiving,
 whatever Python takes). Each observer also reports the status samples and goal entries
 that reached Python (``take_data``'s ``status``), and the library's ``goal_status_state``: the
-entries the samples listed, and those it converted.
+entries the samples listed, and those it converted; and its ``response_filter_state``: the other
+clients' goal, cancel and result responses its readers dropped before they woke the executor.
 
 Results (machine, date, command, load averages, every raw figure) go to
 ``benchmarks/results/status-observer-<date>-<host>.json``.
@@ -158,13 +159,15 @@ def table(result: dict[str, Any]) -> str:
                 ' / '.join(f'{r:.2f}' for r in ratios),
                 fmt(first.get('status'), 'd'), fmt(first.get('status_entries'), 'd'),
                 fmt(first.get('status_entries_listed'), 'd'),
+                fmt(first.get('responses_dropped'), 'd'),
                 ' / '.join(f"{r['goals_s']:.0f}" for r in rounds)])
     return '\n'.join(markdown_table(
         ['server', 'observer', 'CPU s per round', 'of it, Fast DDS threads',
          'median ratio to plain', 'ratios',
          'status samples to Python (round 1)', 'entries to Python (round 1)',
-         'entries listed (round 1)', 'goals took s'], rows,
-        ['---', '---'] + ['---:'] * 8))
+         'entries listed (round 1)', "others' responses dropped before Python (round 1)",
+         'goals took s'], rows,
+        ['---', '---'] + ['---:'] * 9))
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:

@@ -18,7 +18,8 @@ from typing import Any, TYPE_CHECKING
 from cft_action.errors import CftActionError, ContentFilterError, InvalidArgumentError
 
 if TYPE_CHECKING:
-    from cft_action.client import ActionClient, FeedbackFilterState, GoalStatusState
+    from cft_action.client import (ActionClient, FeedbackFilterState, GoalStatusState,
+                                   ResponseFilterState)
     from cft_action.parameter_events import ParameterEventFilterState, ParameterEventHandler
     from cft_action.subscription import (ContentFilterOptions, create_filtered_subscription,
                                          get_content_filter, is_content_filter_supported,
@@ -29,6 +30,7 @@ _LAZY = {
     'ActionClient': 'client',
     'FeedbackFilterState': 'client',
     'GoalStatusState': 'client',
+    'ResponseFilterState': 'client',
     'ParameterEventFilterState': 'parameter_events',
     'ParameterEventHandler': 'parameter_events',
     'ContentFilterOptions': 'subscription',
@@ -42,8 +44,8 @@ _LAZY = {
 __all__ = [
     'ActionClient', 'CftActionError', 'ContentFilterError', 'FeedbackFilterState',
     'GoalStatusState', 'InvalidArgumentError', 'ParameterEventFilterState', 'ParameterEventHandler',
-    'ContentFilterOptions', 'create_filtered_subscription', 'get_content_filter',
-    'is_content_filter_supported', 'is_filtered', 'set_content_filter',
+    'ContentFilterOptions', 'ResponseFilterState', 'create_filtered_subscription',
+    'get_content_filter', 'is_content_filter_supported', 'is_filtered', 'set_content_filter',
 ]
 
 

@@ -14,6 +14,10 @@
 #include <fastdds/rtps/builtin/data/ReaderProxyData.h>
 #include <fastdds/rtps/common/CacheChange.h>
 #include <fastdds/rtps/common/SerializedPayload.h>
+#include <fastdds/rtps/common/WriteParams.h>
+#include <fastdds/rtps/history/ReaderHistory.h>
+#include <fastdds/rtps/reader/RTPSReader.h>
+#include <fastrtps/attributes/TopicAttributes.h>
 #include <cstddef>
 
 using eprosima::fastdds::dds::DataWriterQos;
@@ -21,9 +25,14 @@ using eprosima::fastdds::dds::WriterResourceLimitsQos;
 using eprosima::fastdds::rtps::ContentFilterProperty;
 using eprosima::fastrtps::ResourceLimitedVector;
 using eprosima::fastrtps::string_255;
+using eprosima::fastrtps::TopicAttributes;
 using eprosima::fastrtps::rtps::CacheChange_t;
+using eprosima::fastrtps::rtps::ReaderHistory;
 using eprosima::fastrtps::rtps::ReaderProxyData;
+using eprosima::fastrtps::rtps::RTPSReader;
+using eprosima::fastrtps::rtps::SampleIdentity;
 using eprosima::fastrtps::rtps::SerializedPayload_t;
+using eprosima::fastrtps::rtps::WriteParams;
 
 #define LAYOUT(name, value, what) asm volatile("\n->" #name " %c0 " what : : "i"((long)(value)))
 
@@ -58,6 +67,14 @@ void cft_fastdds_layout() {
   LAYOUT(CC_KIND_SIZE, sizeof(CacheChange_t::kind), "sizeof(ChangeKind_t)");
   LAYOUT(CC_PAYLOAD, offsetof(CacheChange_t, serializedPayload),
          "CacheChange_t::serializedPayload (SerializedPayload_t)");
+  LAYOUT(CC_SAMPLE_WRITER_GUID,
+         offsetof(CacheChange_t, write_params) + offsetof(WriteParams, sample_identity_) +
+             offsetof(SampleIdentity, writer_guid_),
+         "CacheChange_t::write_params.sample_identity().writer_guid() (GUID_t)");
+  LAYOUT(RR_HISTORY, offsetof(RTPSReader, mp_history), "RTPSReader::mp_history");
+  LAYOUT(RR_DATA_FILTER, offsetof(RTPSReader, data_filter_), "RTPSReader::data_filter_");
+  LAYOUT(RH_READER, offsetof(ReaderHistory, mp_reader), "ReaderHistory::mp_reader");
+  LAYOUT(TOPIC_NAME, offsetof(TopicAttributes, topicName), "TopicAttributes::topicName");
   LAYOUT(DWQ_READER_FILTERS,
          offsetof(DataWriterQos, writer_resource_limits_) +
              offsetof(WriterResourceLimitsQos, reader_filters_allocation),

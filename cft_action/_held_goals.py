@@ -75,7 +75,8 @@ def _forward(source: Future, target: Future) -> None:
 class HeldGoals:
     """The action client's held goal requests, and the timer that polls its arrival gate.
 
-    Every call but the timer's is made with ``lock`` held, which the timer takes too.
+    Every call but the timer's and :meth:`await_proof` is made with ``lock`` held, which those
+    take themselves.
 
     :param node: The client's node, for the timer.
     :param callback_group: The client's callback group, for the timer.
@@ -142,6 +143,21 @@ class HeldGoals:
             self._destroyed = True  # a poll that runs now begins no new proof
             self._gate.end()
         self._timer.destroy()
+
+    def await_proof(self, deadline: float) -> bool:
+        """Poll the proof begun at construction (or a new one) until it came or ``deadline``.
+
+        Takes ``lock`` for each poll; call it without.
+        """
+        while True:
+            with self._lock:
+                if self._gate.is_confirmed(0):
+                    return True
+                self._gate.begin(self._version_now())  # unless one runs
+                came = self.poll_proof()
+            if came is not None or time.monotonic() >= deadline:
+                return bool(came)
+            time.sleep(self._poll_period)
 
     def poll_proof(self) -> Optional[bool]:
         """Poll the running proof: True once it came, False once it timed out, else None.

@@ -225,6 +225,13 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'cft_filter_class_begin': (_reader_lock, None, [ctypes.c_char_p], None),
     'cft_filter_class_end': (_reader_lock, _void_p, [], None),
     'cft_filter_class_verdicts': (_reader_lock, ctypes.c_ulong, [_void_p], None),
+    'cft_response_filter_install': (_reader_lock, ctypes.c_int, [], None),
+    'cft_response_filter_error': (_reader_lock, ctypes.c_char_p, [], None),
+    'cft_response_filter_begin': (_reader_lock, None, [], None),
+    'cft_response_filter_end': (_reader_lock, _void_p, [ctypes.POINTER(ctypes.c_int)], None),
+    'cft_response_filter_refused': (_reader_lock, ctypes.c_char_p, [], None),
+    'cft_response_filter_counts':
+        (_reader_lock, None, [_void_p, ctypes.POINTER(ctypes.c_ulong)], None),
     'cft_writer_marks_install': (_reader_lock, ctypes.c_int, [], None),
     'cft_writer_marks_error': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_writer_is_marked': (_reader_lock, ctypes.c_int, [ctypes.c_char_p], None),
@@ -341,6 +348,34 @@ def filter_class_status() -> str:
     if _lib.cft_filter_class_install() >= 0:
         return ''
     return (_lib.cft_filter_class_error() or b'').decode('utf-8', 'replace')
+
+
+def response_filter_begin() -> str:
+    """Give the response readers that this thread creates until :func:`response_filter_end` the
+    library's filter, which drops other participants' responses in the receive thread
+    (cft_action/_response_filter.c); return why it cannot, or ``''``."""
+    if 'fastrtps' not in get_rmw_implementation_identifier():
+        return f'{get_rmw_implementation_identifier()} is not rmw_fastrtps'
+    if _lib.cft_response_filter_install() < 0:
+        return (_lib.cft_response_filter_error() or b'').decode('utf-8', 'replace')
+    _lib.cft_response_filter_begin()
+    return ''
+
+
+def response_filter_end() -> tuple[Optional[int], int, str]:
+    """``(filter, readers, refused)``: the filter those readers share (None if none got it), how
+    many got it, and why one did not (``''`` if none was refused)."""
+    readers = ctypes.c_int()
+    created = _lib.cft_response_filter_end(ctypes.byref(readers))
+    return created, readers.value, (_lib.cft_response_filter_refused() or b'').decode(
+        'utf-8', 'replace')
+
+
+def response_filter_counts(created_filter: int) -> tuple[int, int]:
+    """``(dropped, passed)``: the responses a filter from :func:`response_filter_end` judged."""
+    counts = (ctypes.c_ulong * 2)()
+    _lib.cft_response_filter_counts(created_filter, counts)
+    return counts[0], counts[1]
 
 
 def filter_class_verdicts(created_filter: int) -> int:

@@ -36,6 +36,7 @@ from cft_action._filtered_reader import filter_class_for, WRITER_FILTERING, WRIT
 from cft_action._finished_goals import FinishedGoals
 from cft_action._goal_status import GoalStatusState, OwnGoalStatus
 from cft_action._held_goals import cancel_goal_probe, HeldGoal, HeldGoals
+from cft_action._own_responses import OwnResponses, ResponseFilterState
 from cft_action._rclpy_compat import CompatActionClient, PromptLogger
 from cft_action.arrival import ArrivalGate, RemotePublishers
 from cft_action.errors import InvalidArgumentError
@@ -43,7 +44,7 @@ from cft_action.goal_filter import MODES
 from cft_action.subscription import is_content_filter_supported
 
 __all__ = ['ActionClient', 'FeedbackFilterState', 'FEEDBACK_FILTER_ENV', 'GoalStatusState',
-           'MORE_FEEDBACK', 'WRITER_FILTERING_ENV', 'WRITER_FILTERING']
+           'MORE_FEEDBACK', 'ResponseFilterState', 'WRITER_FILTERING_ENV', 'WRITER_FILTERING']
 
 #: Environment variable with which operators override the ``feedback_filter`` argument.
 FEEDBACK_FILTER_ENV = 'CFT_ACTION_FEEDBACK_FILTER'
@@ -211,8 +212,10 @@ class ActionClient(CompatActionClient):
         # The arrival probe's cancel client has the cancel service's profile: a probe's reply among
         # many clients' cancel replies must not fall out of a shallower queue.
         self._cancel_qos = services['cancel_service_qos_profile']
-        super().__init__(node, action_type, action_name, request_lock=self._reader.lock,
-                         **services)  # _cft_before_first_wait
+        self._responses = OwnResponses(self._cft_logger)
+        with self._responses.filtering():
+            super().__init__(node, action_type, action_name, request_lock=self._reader.lock,
+                             **services)  # _cft_before_first_wait
         if not self._filter.installed:
             self._reader.fall_back('rclpy did not add the client through Node.add_waitable')
             self._assemble()
@@ -284,6 +287,11 @@ class ActionClient(CompatActionClient):
     def goal_status_state(self) -> GoalStatusState:
         """Whether status samples reach Python trimmed to this client's goals, and counters."""
         return self._status.state
+
+    @property
+    def response_filter_state(self) -> ResponseFilterState:
+        """Whether other clients' goal, cancel and result responses are dropped before Python."""
+        return self._responses.state
 
     def new_goal_uuid(self) -> UUID:
         """
@@ -369,22 +377,10 @@ class ActionClient(CompatActionClient):
             left = FILTER_ARRIVAL_TIMEOUT
             if timeout_sec is not None and timeout_sec >= 0:
                 left = min(left, max(0.0, timeout_sec - (time.monotonic() - started)))
-            if not self._await_reader_proof(time.monotonic() + left):
+            if not self._held_goals.await_proof(time.monotonic() + left):
                 self._cft_logger.debug('wait_for_server: the server did not prove that it has '
                                        'the feedback reader in time; the first goal will be held')
         return True
-
-    def _await_reader_proof(self, deadline: float) -> bool:
-        """Poll the proof begun at construction (or a new one) until it came or ``deadline``."""
-        while True:
-            with self._reader.lock:
-                if self._arrival.is_confirmed(0):
-                    return True
-                self._arrival.begin(self._reader.updates)  # unless one runs
-                came = self._held_goals.poll_proof()
-            if came is not None or time.monotonic() >= deadline:
-                return bool(came)
-            time.sleep(ARRIVAL_POLL_PERIOD)
 
     def destroy(self) -> None:
         """Destroy the underlying action client handle."""

@@ -40,6 +40,9 @@ What it counts, from ``go`` on:
 - ``status_samples_read`` and ``status_entries_listed`` (``client``/``goals``): status samples
   that the library's status trim read, and the goal entries they listed, most never converted to
   Python (``status_entries`` counts those that were).
+- ``responses_dropped`` and ``responses_passed`` (``client``/``goals``): other clients' goal,
+  cancel and result responses that the client's response readers dropped before Python, and the
+  responses they passed (``response_filter_state``).
 - ``updates``: filter changes (``client``/``goals``: ``feedback_filter_state.updates``;
   ``upstream``: every ``set_content_filter`` call, with ``recreations`` of the DataReader).
 
@@ -158,14 +161,15 @@ def make_client(node: Node, config: str, action: str, qos: QoSProfile) -> Any:
 
 
 def filter_counters(client: Any) -> dict[str, Any]:
-    """The filter's counters, whatever the configuration; for cft_action, also the status trim's:
-    the status samples it read and the goal entries they listed."""
+    """The filter's counters, whatever the configuration; for cft_action, also the status trim's
+    (the status samples it read and the goal entries they listed) and the response filter's."""
     state = getattr(client, 'feedback_filter_state', None)
     if state is not None:
-        status = client.goal_status_state
+        status, responses = client.goal_status_state, client.response_filter_state
         return {'updates': state.updates, 'active': state.active, 'reason': state.reason,
                 'lib_taken': state.feedback_taken, 'lib_dropped': state.feedback_dropped,
-                'status_samples_read': status.samples, 'status_entries_listed': status.entries}
+                'status_samples_read': status.samples, 'status_entries_listed': status.entries,
+                'responses_dropped': responses.dropped, 'responses_passed': responses.passed}
     if hasattr(client, 'filter_sets'):
         return {'updates': client.filter_sets, 'recreations': client.recreations,
                 'active': not client.disabled_reason, 'reason': client.disabled_reason}

@@ -1,0 +1,204 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// An action client's goal, cancel and result responses, filtered in its own DDS readers
+// (docs/INTERNALS.md section 23). A server's response writer sends every response to every
+// client's response reader; rmw_fastrtps's take then discards each response whose related sample
+// identity names neither this client's response reader nor its request writer
+// (`__rmw_take_response`), after the sample has woken the executor. Here each response reader of
+// the library's action clients gets a reader-side data filter (`RTPSReader::data_filter_`, the
+// hook Fast DDS's ContentFilteredTopic readers use) that drops, in the receive thread, the
+// responses whose related identity names another participant. Those are a subset of what the take
+// discards, so the client sees exactly the responses it saw before, with fewer wakes; Fast DDS
+// marks a dropped sample irrelevant, so the reader acknowledges it as if it had been taken.
+//
+// The readers are found as they are created: RTPSParticipant::registerReader, which
+// DataReaderImpl::enable calls through libfastrtps's PLT, is redirected; on a thread inside
+// cft_response_filter_begin/end, a reader of a topic "rr/...Reply" (rmw_fastrtps's response
+// topics) without a content filter gets the filter before the real registration, so before any
+// writer is matched and any receive thread reads the member.
+//
+// The member's offset comes from the headers (_fastdds_layout.h), and is checked on each reader:
+// its history's back pointer (`ReaderHistory::mp_reader`, set by the RTPSReader's constructor) must
+// hold the reader at the headers' offset of `mp_history` moved by exactly one distance of at most
+// 64 bytes (a security build's EndpointAttributes are larger), the same distance moves
+// `data_filter_`, and that word must be null. Words are read with process_vm_readv, so a wrong
+// layout fails the check instead of the process.
+#define _GNU_SOURCE
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/uio.h>
+#include <unistd.h>
+
+#include "_fastdds_layout.h"
+#include "_patch.h"
+
+#define EXPORT __attribute__((visibility("default")))
+
+#define FASTRTPS_SONAME "libfastrtps.so.2.14"
+#define REGISTER_READER                                                                      \
+  "_ZN8eprosima8fastrtps4rtps15RTPSParticipant14registerReaderEPNS1_10RTPSReaderERKNS0_15" \
+  "TopicAttributesERKNS_7fastdds3dds9ReaderQosEPKNS8_4rtps21ContentFilterPropertyE"
+
+// rmw_fastrtps names a service's response topic "rr/<service>Reply".
+#define RESPONSE_PREFIX "rr/"
+#define RESPONSE_SUFFIX "Reply"
+#define MAX_MOVE 64
+
+typedef bool (*register_reader_fn)(void *self, void *reader, const void *topic, const void *qos,
+                                   const void *content_filter);
+
+// One per action client, shared by its response readers. Never freed: rclpy destroys the rcl
+// client once no executor uses it, which may be after the client's destroy() returns.
+struct response_filter {
+  const void *const *vtable;
+  unsigned long dropped, passed;
+};
+
+static register_reader_fn real_register_reader;
+static struct cft_install installed = CFT_INSTALL_INIT;
+static __thread bool requested;                   // inside cft_response_filter_begin/end
+static __thread struct response_filter *current;  // this request's, once a reader got it
+static __thread int filtered_here;                // readers given the filter in this request
+static __thread char refused[160];  // why a response reader of this request did not get it
+
+// IReaderDataFilter declares one pure virtual member and no destructor: its Itanium vtable is
+// { is_relevant }. A received change holds the related sample identity of its inline QoS in
+// write_params.sample_identity (ParameterList::updateCacheChangeFromInlineQos; the intraprocess
+// and data-sharing paths copy it there too), which is what rmw_fastrtps's take compares.
+static bool is_relevant(struct response_filter *self, const uint8_t *change,
+                        const uint8_t *reader_guid) {
+#if CFT_LAYOUT_KNOWN
+  static const uint8_t unknown[16];
+  const uint8_t *related = change + CC_SAMPLE_WRITER_GUID;
+  // No identity (another vendor, an older rmw): the take decides, as without the filter.
+  if (memcmp(related, unknown, sizeof unknown) == 0 || memcmp(related, reader_guid, 12) == 0) {
+    __atomic_fetch_add(&self->passed, 1, __ATOMIC_RELAXED);
+    return true;
+  }
+  __atomic_fetch_add(&self->dropped, 1, __ATOMIC_RELAXED);
+  return false;
+#else
+  (void)self;
+  (void)change;
+  (void)reader_guid;
+  return true;
+#endif
+}
+
+static const void *const filter_vtable[] = {(const void *)is_relevant};
+
+// A word of this process's memory, or false where it is not mapped.
+static bool read_word(uintptr_t address, uintptr_t *word) {
+  struct iovec local = {word, sizeof *word}, remote = {(void *)address, sizeof *word};
+  return process_vm_readv(getpid(), &local, 1, &remote, 1, 0) == (ssize_t)sizeof *word;
+}
+
+#if CFT_LAYOUT_KNOWN
+// Whether a fixed_string<255> (the headers' layout: the characters, then their count) holds a
+// response topic's name.
+static bool is_response_topic(const char *name) {
+  size_t length, prefix = strlen(RESPONSE_PREFIX), suffix = strlen(RESPONSE_SUFFIX);
+  memcpy(&length, name + STRING255_LENGTH, sizeof length);
+  return length < STRING255_LENGTH && name[length] == '\0' && length > prefix + suffix &&
+         strncmp(name, RESPONSE_PREFIX, prefix) == 0 &&
+         strcmp(name + length - suffix, RESPONSE_SUFFIX) == 0;
+}
+#endif
+
+#if CFT_LAYOUT_KNOWN
+// The address of the reader's data_filter_, or 0 after saying why in `refused`.
+static uintptr_t data_filter_member(uintptr_t reader) {
+  int found = 0;
+  uintptr_t member = 0;
+  for (uintptr_t move = 0; move <= MAX_MOVE; move += 4) {
+    uintptr_t history, back;
+    if (read_word(reader + RR_HISTORY + move, &history) && history != 0 &&
+        read_word(history + RH_READER, &back) && back == reader) {
+      found++;
+      member = reader + RR_DATA_FILTER + move;
+    }
+  }
+  uintptr_t current = 1;
+  if (found != 1) {
+    snprintf(refused, sizeof refused,
+             "the reader's history does not point back to it at exactly one offset near the "
+             "headers' (%d found): the loaded Fast DDS has another RTPSReader layout", found);
+    return 0;
+  }
+  if (!read_word(member, &current) || current != 0) {
+    snprintf(refused, sizeof refused, "the reader already has a data filter");
+    return 0;
+  }
+  return member;
+}
+#endif
+
+static bool register_reader(void *self, void *reader, const void *topic, const void *qos,
+                            const void *content_filter) {
+#if CFT_LAYOUT_KNOWN
+  if (requested && content_filter == NULL && reader != NULL &&
+      is_response_topic((const char *)topic + TOPIC_NAME)) {
+    uintptr_t member = data_filter_member((uintptr_t)reader);
+    if (member != 0 && current == NULL && (current = calloc(1, sizeof *current)) != NULL)
+      current->vtable = filter_vtable;
+    if (member != 0 && current != NULL) {
+      // Not registered yet: no writer is matched, so no receive thread reads the member.
+      *(struct response_filter **)member = current;
+      filtered_here++;
+    }
+  }
+#endif
+  return real_register_reader(self, reader, topic, qos, content_filter);
+}
+
+static int install(struct cft_install *once) {
+#if !CFT_LAYOUT_KNOWN
+  return cft_install_fail(once, -5, "no Fast DDS layout at build time:", CFT_LAYOUT_SOURCE);
+#else
+  static const char *const names[] = {REGISTER_READER};
+  void *resolved[1];
+  int status;
+  if (cft_resolve(once, FASTRTPS_SONAME, names, 1, resolved, &status) == NULL) return status;
+  real_register_reader = (register_reader_fn)resolved[0];
+  if (cft_patch_got(FASTRTPS_SONAME, REGISTER_READER, resolved[0], (void *)register_reader) != 1)
+    return cft_install_fail(once, -3, "no free PLT slot in " FASTRTPS_SONAME " for",
+                            REGISTER_READER);
+  return 0;
+#endif
+}
+
+// 0 once response readers created inside cft_response_filter_begin/end get the filter; < 0 if
+// that cannot be arranged (cft_response_filter_error says why). Later calls return the first
+// result.
+EXPORT int cft_response_filter_install(void) { return cft_install_once(&installed, install); }
+
+EXPORT const char *cft_response_filter_error(void) { return installed.error; }
+
+// Around the creation of an action client (rcl_action_client_init) on this thread.
+EXPORT void cft_response_filter_begin(void) {
+  requested = true;
+  current = NULL;
+  filtered_here = 0;
+  refused[0] = '\0';
+}
+
+// Ends the request; returns its filter (NULL if no reader got one), and in `*readers` how many
+// response readers got it.
+EXPORT void *cft_response_filter_end(int *readers) {
+  requested = false;
+  *readers = filtered_here;
+  return current;
+}
+
+// Why a response reader of the last request did not get the filter; empty if none was refused.
+EXPORT const char *cft_response_filter_refused(void) { return refused; }
+
+// The responses a filter dropped and passed.
+EXPORT void cft_response_filter_counts(const struct response_filter *filter,
+                                       unsigned long *counts) {
+  counts[0] = __atomic_load_n(&filter->dropped, __ATOMIC_RELAXED);
+  counts[1] = __atomic_load_n(&filter->passed, __ATOMIC_RELAXED);
+}
