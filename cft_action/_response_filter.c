@@ -21,15 +21,15 @@
 // its history's back pointer (`ReaderHistory::mp_reader`, set by the RTPSReader's constructor) must
 // hold the reader at the headers' offset of `mp_history` moved by exactly one distance of at most
 // 64 bytes (a security build's EndpointAttributes are larger), the same distance moves
-// `data_filter_`, and that word must be null. Words are read with process_vm_readv, so a wrong
-// layout fails the check instead of the process.
+// `data_filter_`, and that word must be null. Words are read through a pipe (read_word), so a
+// wrong layout fails the check instead of the process.
 #define _GNU_SOURCE
 #include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <sys/uio.h>
+#include <fcntl.h>
 #include <unistd.h>
 
 #include "_fastdds_layout.h"
@@ -90,13 +90,15 @@ static bool is_relevant(struct response_filter *self, const uint8_t *change,
 
 static const void *const filter_vtable[] = {(const void *)is_relevant};
 
-// A word of this process's memory, or false where it is not mapped.
-static bool read_word(uintptr_t address, uintptr_t *word) {
-  struct iovec local = {word, sizeof *word}, remote = {(void *)address, sizeof *word};
-  return process_vm_readv(getpid(), &local, 1, &remote, 1, 0) == (ssize_t)sizeof *word;
+#if CFT_LAYOUT_KNOWN
+// A word of this process's memory, or false where it cannot be read: write(2) from an address
+// that is not mapped readable fails with EFAULT where a load would fault. (process_vm_readv would
+// do too, but the seccomp profiles of containers commonly forbid it.)
+static bool read_word(const int fds[2], uintptr_t address, uintptr_t *word) {
+  return write(fds[1], (const void *)address, sizeof *word) == (ssize_t)sizeof *word &&
+         read(fds[0], word, sizeof *word) == (ssize_t)sizeof *word;
 }
 
-#if CFT_LAYOUT_KNOWN
 // Whether a fixed_string<255> (the headers' layout: the characters, then their count) holds a
 // response topic's name.
 static bool is_response_topic(const char *name) {
@@ -106,29 +108,34 @@ static bool is_response_topic(const char *name) {
          strncmp(name, RESPONSE_PREFIX, prefix) == 0 &&
          strcmp(name + length - suffix, RESPONSE_SUFFIX) == 0;
 }
-#endif
 
-#if CFT_LAYOUT_KNOWN
 // The address of the reader's data_filter_, or 0 after saying why in `refused`.
 static uintptr_t data_filter_member(uintptr_t reader) {
+  int fds[2];
+  if (pipe2(fds, O_CLOEXEC | O_NONBLOCK) != 0) {
+    snprintf(refused, sizeof refused, "no pipe to read the reader's layout through");
+    return 0;
+  }
   int found = 0;
-  uintptr_t member = 0;
+  uintptr_t member = 0, value = 1;
   for (uintptr_t move = 0; move <= MAX_MOVE; move += 4) {
     uintptr_t history, back;
-    if (read_word(reader + RR_HISTORY + move, &history) && history != 0 &&
-        read_word(history + RH_READER, &back) && back == reader) {
+    if (read_word(fds, reader + RR_HISTORY + move, &history) && history != 0 &&
+        read_word(fds, history + RH_READER, &back) && back == reader) {
       found++;
       member = reader + RR_DATA_FILTER + move;
     }
   }
-  uintptr_t current = 1;
+  bool unset = found == 1 && read_word(fds, member, &value) && value == 0;
+  close(fds[0]);
+  close(fds[1]);
   if (found != 1) {
     snprintf(refused, sizeof refused,
              "the reader's history does not point back to it at exactly one offset near the "
              "headers' (%d found): the loaded Fast DDS has another RTPSReader layout", found);
     return 0;
   }
-  if (!read_word(member, &current) || current != 0) {
+  if (!unset) {
     snprintf(refused, sizeof refused, "the reader already has a data filter");
     return 0;
   }
@@ -144,7 +151,9 @@ static bool register_reader(void *self, void *reader, const void *topic, const v
     uintptr_t member = data_filter_member((uintptr_t)reader);
     if (member != 0 && current == NULL && (current = calloc(1, sizeof *current)) != NULL)
       current->vtable = filter_vtable;
-    if (member != 0 && current != NULL) {
+    if (member != 0 && current == NULL) {
+      snprintf(refused, sizeof refused, "no memory for the filter");
+    } else if (member != 0) {
       // Not registered yet: no writer is matched, so no receive thread reads the member.
       *(struct response_filter **)member = current;
       filtered_here++;
