@@ -47,7 +47,7 @@ from typing import Any, Optional, Sequence
 
 from harness import load
 from harness.capture import CATEGORIES
-from harness.cli import int_list, name_list
+from harness.cli import add_server_feedback_depth, int_list, name_list
 from harness.report import fmt
 
 REPO = Path(__file__).resolve().parent.parent
@@ -75,6 +75,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                         help='seconds of quiet after the last goal before a phase is accounted '
                              '(more than the server\'s 2 s result timeout, whose status is '
                              'counted)')
+    add_server_feedback_depth(parser)
     parser.add_argument('--no-capture', action='store_true',
                         help='no packet capture on the bystander: rx_bytes only')
     parser.add_argument('--output', type=Path, default=None,
@@ -128,7 +129,7 @@ def run_size(size: str, args: argparse.Namespace, record: dict[str, Any],
     spec = load.LoadSpec(clients=max(args.neighbours), goals=args.goals,
                          order=max(1, round(args.duration * args.rate)), rate_hz=args.rate,
                          pad=load.SIZES[size], network='netns', settle_s=args.settle,
-                         bystanders=1)
+                         bystanders=1, server_feedback_depth=args.server_feedback_depth)
     record.update({'size': size, 'spec': dataclasses.asdict(spec), 'phases': [], 'rows': []})
     run_class = load.LoadRun if args.no_capture else load.CapturingRun
     run = run_class(spec, progress)

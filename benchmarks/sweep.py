@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import Any, Optional, Sequence
 
 from harness import load
-from harness.cli import float_list, int_list, name_list
+from harness.cli import add_server_feedback_depth, float_list, int_list, name_list
 from harness.report import fmt
 
 REPO = Path(__file__).resolve().parent.parent
@@ -74,10 +74,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--guard', choices=('on', 'off'), default='on',
                         help="'off': the server runs without `cft-action guard`, as the server of "
                              'someone who only swapped a client import')
-    parser.add_argument('--server-feedback-depth', type=int, default=None,
-                        help="the server's feedback writer alone keeps this many samples (rclpy's "
-                             'default: 10); default: as deep as every queue, which holds all of a '
-                             "phase's feedback")
+    add_server_feedback_depth(parser)
     parser.add_argument('--drain-timeout', type=float, default=300.0,
                         help='seconds a phase may take after its goals finished')
     parser.add_argument('--goals-timeout', type=float, default=None,

@@ -14,7 +14,12 @@ Bytes are real network bytes when network namespaces can be made (root and iprou
 then has a namespace and an interface of its own. Otherwise they are estimated from the message
 counts, and the output says so.
 
-Usage: ``python -m demos.load_demo [--clients 8] [--goals 4] [--order 500] [--rate 100] ...``
+The server keeps every feedback sample of a phase unless ``--server-feedback-depth N`` gives its
+feedback writer rclpy's keep-last N (10 by default in rclpy): with a full history Fast DDS heartbeats
+every reader at every write, which the guard narrows (docs/INTERNALS.md, section 22).
+
+Usage: ``python -m demos.load_demo [--clients 8] [--goals 4] [--order 500] [--rate 100]
+[--server-feedback-depth 10] ...``
 """
 
 from __future__ import annotations
@@ -29,6 +34,7 @@ from pathlib import Path
 from typing import Optional, Sequence
 
 from harness import load
+from harness.cli import add_server_feedback_depth
 
 DEFAULT_OUTPUT = Path(__file__).resolve().parent.parent / 'demo-output'
 
@@ -54,6 +60,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--output', type=Path, default=DEFAULT_OUTPUT,
                         help='directory for load_demo.png and load_demo.json')
     parser.add_argument('--no-plot', action='store_true', help='skip the PNG')
+    add_server_feedback_depth(parser)
     args = parser.parse_args(argv)
     args.configs = [c.strip() for c in args.configs.split(',') if c.strip()]
     args.unguarded = [c.strip() for c in args.unguarded.split(',') if c.strip()]
@@ -72,7 +79,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         print(f'[{time.monotonic() - started:6.1f} s] {line}', flush=True)
 
     spec = load.LoadSpec(clients=args.clients, goals=args.goals, order=args.order,
-                             rate_hz=args.rate, pad=args.pad, network=args.network)
+                         rate_hz=args.rate, pad=args.pad, network=args.network,
+                         server_feedback_depth=args.server_feedback_depth)
     progress(f'load: {spec.clients} client processes x {spec.goals} goals, {spec.order} '
              f'feedback messages per goal at {spec.rate_hz:g} Hz; configurations: '
              + ', '.join(load.CONFIG_LABELS[c] for c in args.configs))

@@ -1,4 +1,4 @@
-"""Command-line value types shared by the demos and benchmarks (argparse ``type=`` callables)."""
+"""Command-line value types and options shared by the demos and benchmarks."""
 
 from __future__ import annotations
 
@@ -29,3 +29,12 @@ def name_list(known: Iterable[str]) -> Callable[[str], list[str]]:
         return names
 
     return parse
+
+
+def add_server_feedback_depth(parser: argparse.ArgumentParser) -> None:
+    """``--server-feedback-depth N``: the load server's feedback writer alone keeps N samples
+    (:attr:`harness.load.LoadSpec.server_feedback_depth`)."""
+    parser.add_argument('--server-feedback-depth', type=int, default=None,
+                        help="the server's feedback writer alone keeps this many samples (rclpy's "
+                             'default: 10); default: as deep as every queue, which holds all of a '
+                             "phase's feedback")
