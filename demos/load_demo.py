@@ -15,8 +15,8 @@ then has a namespace and an interface of its own. Otherwise they are estimated f
 counts, and the output says so.
 
 The server keeps every feedback sample of a phase unless ``--server-feedback-depth N`` gives its
-feedback writer rclpy's keep-last N (10 by default in rclpy): with a full history Fast DDS heartbeats
-every reader at every write, which the guard narrows (docs/INTERNALS.md, section 22).
+feedback writer rclpy's keep-last N (10 by default in rclpy): with a full history Fast DDS
+heartbeats every reader at every write, which the guard narrows (docs/INTERNALS.md, section 22).
 
 Usage: ``python -m demos.load_demo [--clients 8] [--goals 4] [--order 500] [--rate 100]
 [--server-feedback-depth 10] ...``
