@@ -343,23 +343,27 @@ def filter_class_status() -> str:
 
     Only for Fast DDS 2.14 (``libfastrtps.so.2.14``): elsewhere the reason names what is missing.
     """
+    return _install_part(_lib.cft_filter_class_install, _lib.cft_filter_class_error)
+
+
+def _install_part(install: Callable[[], int], error: Callable[[], Optional[bytes]]) -> str:
+    """Run a part's ``cft_*_install`` (one of _cftreader's redirections into the loaded Fast DDS
+    2.14); return why the part cannot work in this process, or ``''``."""
     if 'fastrtps' not in get_rmw_implementation_identifier():
         return f'{get_rmw_implementation_identifier()} is not rmw_fastrtps'
-    if _lib.cft_filter_class_install() >= 0:
-        return ''
-    return (_lib.cft_filter_class_error() or b'').decode('utf-8', 'replace')
+    if install() < 0:
+        return (error() or b'').decode('utf-8', 'replace')
+    return ''
 
 
 def response_filter_begin() -> str:
     """Give the response readers that this thread creates until :func:`response_filter_end` the
     library's filter, which drops other participants' responses in the receive thread
     (cft_action/_response_filter.c); return why it cannot, or ``''``."""
-    if 'fastrtps' not in get_rmw_implementation_identifier():
-        return f'{get_rmw_implementation_identifier()} is not rmw_fastrtps'
-    if _lib.cft_response_filter_install() < 0:
-        return (_lib.cft_response_filter_error() or b'').decode('utf-8', 'replace')
-    _lib.cft_response_filter_begin()
-    return ''
+    reason = _install_part(_lib.cft_response_filter_install, _lib.cft_response_filter_error)
+    if not reason:
+        _lib.cft_response_filter_begin()
+    return reason
 
 
 def response_filter_end() -> tuple[Optional[int], int, str]:
@@ -388,10 +392,9 @@ def _install_writer_marks() -> tuple[bool, str]:
     """Read, from now on, which discovered writers filter for the library's filter classes
     (cft_action/_writer_marks.c). Returns whether every writer this process can discover will be
     seen (no participant of the default context existed yet), and why not."""
-    if 'fastrtps' not in get_rmw_implementation_identifier():
-        return False, f'{get_rmw_implementation_identifier()} is not rmw_fastrtps'
-    if _lib.cft_writer_marks_install() < 0:
-        return False, (_lib.cft_writer_marks_error() or b'').decode('utf-8', 'replace')
+    reason = _install_part(_lib.cft_writer_marks_install, _lib.cft_writer_marks_error)
+    if reason:
+        return False, reason
     if ok():
         return False, ('cft_action was first used after rclpy.init(): writers discovered before '
                        'are not known')

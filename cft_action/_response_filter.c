@@ -24,12 +24,12 @@
 // `data_filter_`, and that word must be null. Words are read through a pipe (read_word), so a
 // wrong layout fails the check instead of the process.
 #define _GNU_SOURCE
+#include <fcntl.h>
 #include <stdbool.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <fcntl.h>
 #include <unistd.h>
 
 #include "_fastdds_layout.h"
@@ -57,12 +57,14 @@ struct response_filter {
   unsigned long dropped, passed;
 };
 
-static register_reader_fn real_register_reader;
 static struct cft_install installed = CFT_INSTALL_INIT;
 static __thread bool requested;                   // inside cft_response_filter_begin/end
 static __thread struct response_filter *current;  // this request's, once a reader got it
 static __thread int filtered_here;                // readers given the filter in this request
 static __thread char refused[160];  // why a response reader of this request did not get it
+
+#if CFT_LAYOUT_KNOWN
+static register_reader_fn real_register_reader;
 
 // IReaderDataFilter declares one pure virtual member and no destructor: its Itanium vtable is
 // { is_relevant }. A received change holds the related sample identity of its inline QoS in
@@ -70,7 +72,6 @@ static __thread char refused[160];  // why a response reader of this request did
 // and data-sharing paths copy it there too), which is what rmw_fastrtps's take compares.
 static bool is_relevant(struct response_filter *self, const uint8_t *change,
                         const uint8_t *reader_guid) {
-#if CFT_LAYOUT_KNOWN
   static const uint8_t unknown[16];
   const uint8_t *related = change + CC_SAMPLE_WRITER_GUID;
   // No identity (another vendor, an older rmw): the take decides, as without the filter.
@@ -80,17 +81,10 @@ static bool is_relevant(struct response_filter *self, const uint8_t *change,
   }
   __atomic_fetch_add(&self->dropped, 1, __ATOMIC_RELAXED);
   return false;
-#else
-  (void)self;
-  (void)change;
-  (void)reader_guid;
-  return true;
-#endif
 }
 
 static const void *const filter_vtable[] = {(const void *)is_relevant};
 
-#if CFT_LAYOUT_KNOWN
 // A word of this process's memory, or false where it cannot be read: write(2) from an address
 // that is not mapped readable fails with EFAULT where a load would fault. (process_vm_readv would
 // do too, but the seccomp profiles of containers commonly forbid it.)
@@ -141,27 +135,30 @@ static uintptr_t data_filter_member(uintptr_t reader) {
   }
   return member;
 }
-#endif
+
+// This request's filter, made at its first reader; NULL after saying why in `refused`.
+static struct response_filter *request_filter(void) {
+  if (current == NULL && (current = calloc(1, sizeof *current)) != NULL)
+    current->vtable = filter_vtable;
+  if (current == NULL) snprintf(refused, sizeof refused, "no memory for the filter");
+  return current;
+}
 
 static bool register_reader(void *self, void *reader, const void *topic, const void *qos,
                             const void *content_filter) {
-#if CFT_LAYOUT_KNOWN
   if (requested && content_filter == NULL && reader != NULL &&
       is_response_topic((const char *)topic + TOPIC_NAME)) {
     uintptr_t member = data_filter_member((uintptr_t)reader);
-    if (member != 0 && current == NULL && (current = calloc(1, sizeof *current)) != NULL)
-      current->vtable = filter_vtable;
-    if (member != 0 && current == NULL) {
-      snprintf(refused, sizeof refused, "no memory for the filter");
-    } else if (member != 0) {
+    struct response_filter *filter = member != 0 ? request_filter() : NULL;
+    if (filter != NULL) {
       // Not registered yet: no writer is matched, so no receive thread reads the member.
-      *(struct response_filter **)member = current;
+      *(struct response_filter **)member = filter;
       filtered_here++;
     }
   }
-#endif
   return real_register_reader(self, reader, topic, qos, content_filter);
 }
+#endif
 
 static int install(struct cft_install *once) {
 #if !CFT_LAYOUT_KNOWN
