@@ -25,7 +25,7 @@ STAMP := $(VENV)/.installed
 .PHONY: test lint demo bench clean compat
 
 # [jazzy] is ROS 2 Jazzy from PyPI, so that a machine without ROS needs nothing else.
-$(STAMP): pyproject.toml setup.py $(wildcard cft_action/*.c cft_action/*.h)
+$(STAMP): pyproject.toml setup.py $(shell find cft_action/native -name "*.[ch]" -o -name "*.cpp")
 	$(PYTHON_EXE) -m venv $(VENV)
 	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[jazzy,test,bench,lint]'
 	touch $(STAMP)

@@ -36,7 +36,7 @@ os.environ.setdefault('ROS_DOMAIN_ID', str(unused_domain()))
 os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
 
 from cft_action import guard  # noqa: E402
-from cft_action.parameter_events import ParameterEventHandler  # noqa: E402
+from cft_action.parameters.parameter_events import ParameterEventHandler  # noqa: E402
 from harness.proc import Proc, python_module  # noqa: E402
 from harness.ros import RosSession  # noqa: E402
 

@@ -14,7 +14,7 @@ Three guard modes, each with its own servers:
 - ``unguarded``: no guard, as the server of someone who only swapped a client's import: the default
   clients' filter class is unknown to it, so it filters nothing and sends as to plain clients;
 - ``accelerated`` (the default guard): the guard answers uuid-only filters from the sample's UUID
-  bytes (``cft_action/_guard_filter.c``);
+  bytes (``cft_action/native/guard/_guard_filter.c``);
 - ``locking``: the same guard with ``CFT_GUARD_ACCELERATE=0``: only the locks, so Fast DDS
   deserializes every sample once per filtered reader, as an unguarded server does.
 

@@ -121,8 +121,9 @@ def _load(soname: str) -> ctypes.CDLL:
 _rcutils = _load('librcutils.so')
 _rcl = _load('librcl.so')
 _rcl_action = _load('librcl_action.so')
-# cft_action/_reader_lock.c: serializes a reader's own filter evaluation with a filter change;
-# cft_action/_reader_class.c, in the same library: the uuid filter class for the process's readers.
+# cft_action/native/reader/_reader_lock.c: serializes a reader's own filter evaluation with a filter
+# change; cft_action/native/reader/_reader_class.c, in the same library: the uuid filter class for
+# the process's readers.
 _reader_lock = _load(extension_path(READER_LOCK_LIBRARY)
                      or f'{READER_LOCK_LIBRARY} (not built: reinstall with a C compiler)')
 
@@ -274,7 +275,8 @@ def _check_subscription(subscription_ptr: int) -> None:
 
 
 def reader_lock_status() -> str:
-    """Install the reader lock (cft_action/_reader_lock.c) if it is not yet; why not, or ``''``.
+    """Install the reader lock (cft_action/native/reader/_reader_lock.c) if it is not yet; why not,
+    or ``''``.
 
     Without it, Fast DDS 2.14 can crash a process that changes a filter while its reader evaluates
     that filter in a receive thread.
@@ -299,7 +301,7 @@ def set_content_filter(subscription_ptr: int, expression: str,
 
     :param filter_class: create the subscription's filter with one of the library's own filter
         classes (:data:`UUID_FILTER_CLASS` or :data:`NODE_FILTER_CLASS`,
-        cft_action/_filter_class.h) instead of DDS-SQL. It takes effect on the first filter,
+        cft_action/native/_filter_class.h) instead of DDS-SQL. It takes effect on the first filter,
         which creates the filtered topic; later changes keep its class.
     :return: with ``filter_class``, the filter this call created in this process, for
         :func:`filter_class_verdicts`; None otherwise, or when the preloaded guard created it.
@@ -330,9 +332,9 @@ def set_content_filter(subscription_ptr: int, expression: str,
     return created or None
 
 
-#: The library's own filter classes (cft_action/_filter_class.h): goal_id.uuid of action feedback,
-#: and the node of a parameter event; and the status reader's (cft_action/_status_trim.h), which
-#: only this process's readers know.
+#: The library's own filter classes (cft_action/native/_filter_class.h): goal_id.uuid of action
+#: feedback, and the node of a parameter event; and the status reader's
+#: (cft_action/native/reader/_status_trim.h), which only this process's readers know.
 UUID_FILTER_CLASS = 'CFT_ACTION_UUID'
 NODE_FILTER_CLASS = 'CFT_ACTION_NODE'
 STATUS_FILTER_CLASS = 'CFT_ACTION_STATUS'
@@ -359,7 +361,7 @@ def _install_part(install: Callable[[], int], error: Callable[[], Optional[bytes
 def response_filter_begin() -> str:
     """Give the response readers that this thread creates until :func:`response_filter_end` the
     library's filter, which drops other participants' responses in the receive thread
-    (cft_action/_response_filter.c); return why it cannot, or ``''``."""
+    (cft_action/native/reader/_response_filter.c); return why it cannot, or ``''``."""
     reason = _install_part(_lib.cft_response_filter_install, _lib.cft_response_filter_error)
     if not reason:
         _lib.cft_response_filter_begin()
@@ -390,8 +392,8 @@ def filter_class_verdicts(created_filter: int) -> int:
 
 def _install_writer_marks() -> tuple[bool, str]:
     """Read, from now on, which discovered writers filter for the library's filter classes
-    (cft_action/_writer_marks.c). Returns whether every writer this process can discover will be
-    seen (no participant of the default context existed yet), and why not."""
+    (cft_action/native/reader/_writer_marks.c). Returns whether every writer this process can
+    discover will be seen (no participant of the default context existed yet), and why not."""
     reason = _install_part(_lib.cft_writer_marks_install, _lib.cft_writer_marks_error)
     if reason:
         return False, reason
@@ -536,8 +538,8 @@ class StatusTable:
     """The goals of one action client whose status entries go to Python, and the trimming takes.
 
     A ``GoalStatusArray`` sample is taken serialized and trimmed natively to the entries that can
-    change one of this client's goal handles (cft_action/_status_trim.c says which); the others
-    are never converted to Python. Its methods may be called from any thread.
+    change one of this client's goal handles (cft_action/native/reader/_status_trim.c says which);
+    the others are never converted to Python. Its methods may be called from any thread.
     """
 
     #: Bytes of the serialized message's first buffer; rmw grows it for larger samples.

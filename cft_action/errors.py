@@ -8,9 +8,10 @@ written against the builtins keeps working: :class:`ValueError` for input that c
 type raises :class:`TypeError`, as in rclpy.
 
 The errors that belong to one module are defined there, and subclass these:
-:class:`cft_action.sql.FilterError` and :class:`cft_action.goal_filter.ExpressionTooLong`
-(``ValueError``), :class:`cft_action.guard.GuardUnavailable` (``RuntimeError``) and
-:class:`cft_action.topic_api.TopicToolError`.
+:class:`cft_action.topics.sql.FilterError` and
+:class:`cft_action.action.goal_filter.ExpressionTooLong` (``ValueError``),
+:class:`cft_action.guard.GuardUnavailable` (``RuntimeError``) and
+:class:`cft_action.topics.topic_api.TopicToolError`.
 """
 
 from __future__ import annotations

@@ -183,7 +183,7 @@ def filter_class_counts() -> dict[str, int]:
     """Return what this process's writers did with the library's own filter classes.
 
     A client's feedback filter uses one of them (``CFT_ACTION_UUID``), a ParameterEventHandler's
-    node filter the other (``CFT_ACTION_NODE``; cft_action/_filter_class.h); only a guarded
+    node filter the other (``CFT_ACTION_NODE``; cft_action/native/_filter_class.h); only a guarded
     process knows them: ``lookups`` counts the times Fast DDS asked the guard for
     its factory, ``filters`` the filters created (one per filtered reader and writer, and per
     reader of this process), ``verdicts`` the samples they judged, ``changes`` the filters

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Print the Fast DDS layout facts that the guard's build takes from one set of headers: the same
-# probe as setup.py's (cft_action/_fastdds_layout.cpp, compiled to assembly; nothing is linked or
+# probe as setup.py's (cft_action/native/_fastdds_layout.cpp, compiled to assembly; nothing is linked or
 # run), and the build options of the headers' fastrtps/config.h.
 #   compat/probe.sh VENV            the wheels' headers (VENV/include)
 #   compat/probe.sh VENV STACK      a stack's installed headers (STACK/install/include/fastrtps),
@@ -18,4 +18,4 @@ config=$(for d in "${inc[@]}"; do f=${d#-I}/fastrtps/config.h; [ -e "$f" ] && { 
 echo "headers: $config"
 grep -E '^#define (HAVE_SECURITY|HAVE_SQLITE3|FASTRTPS_VERSION_STR) ' "$config"
 ${CXX:-c++} -std=c++17 -S -o - -fno-access-control -Wno-invalid-offsetof "${inc[@]}" \
-  "$root/cft_action/_fastdds_layout.cpp" | sed -n 's/^[[:space:]]*->//p'
+  "$root/cft_action/native/_fastdds_layout.cpp" | sed -n 's/^[[:space:]]*->//p'

@@ -100,7 +100,7 @@ def run_handler(kind: str, watched: list[str], extra: str) -> None:
 
     rclpy.init()
     node = Node(f'demo_handler_{kind}')
-    from cft_action.parameter_events import ParameterEventHandler as Filtered
+    from cft_action.parameters.parameter_events import ParameterEventHandler as Filtered
     from harness.ros import leave_spinning_process
     from rclpy.parameter_event_handler import ParameterEventHandler as Plain
     handler = (Filtered if kind == 'filtered' else Plain)(node)

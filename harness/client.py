@@ -87,10 +87,10 @@ STATUS_COUNTERS = ('status', 'status_entries', 'status_cdr_bytes')
 
 def taken_feedback(data: dict) -> list[Any]:
     """The feedback messages in a ``take_data`` dictionary: rclpy's one, or the library's client's
-    batch (``cft_action.client.MORE_FEEDBACK``)."""
+    batch (``cft_action.action.client.MORE_FEEDBACK``)."""
     first = data.get('feedback')
     # Looked up, not imported: a process of plain rclpy clients does not load the library.
-    library = sys.modules.get('cft_action.client')
+    library = sys.modules.get('cft_action.action.client')
     more = data.get(library.MORE_FEEDBACK, []) if library is not None else []
     return ([] if first is None else [first]) + list(more)
 

@@ -35,7 +35,7 @@ import statistics
 import time
 from typing import Any, Callable, Optional, Sequence
 
-from cft_action.client import FINISHED_GOAL_GRACE
+from cft_action.action.client import FINISHED_GOAL_GRACE
 from harness import netns
 from harness.capture import CATEGORIES
 from harness.crash import fastdds_library

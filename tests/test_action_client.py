@@ -18,10 +18,10 @@ from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
 import cft_action._rcl
-import cft_action.client
+import cft_action.action.client
 from cft_action import ActionClient, guard
-from cft_action.client import FINISHED_GOAL_GRACE
-from cft_action.filters import NEVER_MATCH
+from cft_action.action.client import FINISHED_GOAL_GRACE
+from cft_action.topics.filters import NEVER_MATCH
 from harness.polling import wait_until
 from harness.ros import RosSession, unique_name
 from tests.support import (action_server, helper_process, prove_feedback_path, result_of,
@@ -267,7 +267,7 @@ def test_a_held_goal_waits_from_the_first_spin_not_from_the_call(ros, server, mo
     """A caller that sends goals and spins only later gives the probe no chance before: its wait
     counts from the executor's first poll, so a late spin does not make it give up."""
     # Shorter than the default to keep the test short, still far longer than a reply takes.
-    monkeypatch.setattr(cft_action.client, 'FILTER_ARRIVAL_TIMEOUT', 3.0)
+    monkeypatch.setattr(cft_action.action.client, 'FILTER_ARRIVAL_TIMEOUT', 3.0)
     action, _ = server
     client = make_client(ros, action)
     held = client.feedback_filter_state.held_goals
@@ -485,7 +485,7 @@ def test_a_proof_that_never_comes_costs_a_client_one_hold(ros, mode, monkeypatch
     feedback writer has this client's reader (nor a filter update in ``goals`` mode):
     wait_for_server waits for the proof once, for ``FILTER_ARRIVAL_TIMEOUT``, and every goal after
     it goes out at once, as plain rclpy's, where each goal used to wait that long again."""
-    monkeypatch.setattr(cft_action.client, 'FILTER_ARRIVAL_TIMEOUT', 2.0)  # a shorter test
+    monkeypatch.setattr(cft_action.action.client, 'FILTER_ARRIVAL_TIMEOUT', 2.0)  # a shorter test
     action = '/' + unique_name('fib')
     child = action_server(action, PERIOD, env=guard.environment(), mute_cancel=True)
     try:

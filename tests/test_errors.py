@@ -9,17 +9,17 @@ import cft_action
 from cft_action import _native
 from cft_action.errors import (BindingUnavailable, CftActionError, ContentFilterError,
                                InvalidArgumentError)
-from cft_action.filters import dds_literal, uuid_prefix_term
-from cft_action.goal_filter import GoalFilterPlan
+from cft_action.topics.filters import dds_literal, uuid_prefix_term
+from cft_action.action.goal_filter import GoalFilterPlan
 
 
 def _public_exceptions():
     """Every public exception class defined in a module of the package."""
     found = []
-    for info in pkgutil.iter_modules(cft_action.__path__):
-        if info.name in _native.LIBRARIES:
+    for info in pkgutil.walk_packages(cft_action.__path__, 'cft_action.'):
+        if info.name.rpartition('.')[2] in _native.LIBRARIES:
             continue  # shared objects to preload or to load with ctypes, not Python modules
-        module = importlib.import_module(f'cft_action.{info.name}')
+        module = importlib.import_module(info.name)
         for name, value in vars(module).items():
             if (isinstance(value, type) and issubclass(value, BaseException)
                     and value.__module__ == module.__name__ and not name.startswith('_')):
@@ -39,12 +39,12 @@ def test_every_error_of_the_package_derives_from_the_base():
     ('cft_action.errors', 'BindingUnavailable', RuntimeError),
     ('cft_action._rcl', 'ContentFilterError', RuntimeError),
     ('cft_action._rcl', 'BindingUnavailable', RuntimeError),
-    ('cft_action.subscription', 'ContentFilterError', RuntimeError),
+    ('cft_action.topics.subscription', 'ContentFilterError', RuntimeError),
     ('cft_action.guard', 'GuardUnavailable', RuntimeError),
-    ('cft_action.goal_filter', 'ExpressionTooLong', ValueError),
-    ('cft_action.sql', 'FilterError', ValueError),
-    ('cft_action.topic_api', 'TopicToolError', Exception),
-    ('cft_action.topic_api', 'FilterUnavailable', Exception),
+    ('cft_action.action.goal_filter', 'ExpressionTooLong', ValueError),
+    ('cft_action.topics.sql', 'FilterError', ValueError),
+    ('cft_action.topics.topic_api', 'TopicToolError', Exception),
+    ('cft_action.topics.topic_api', 'FilterUnavailable', Exception),
 ])
 def test_todays_names_import_where_they_did(module, name, builtin):
     error = getattr(importlib.import_module(module), name)

@@ -1,6 +1,6 @@
 """Feedback queued while the executor was busy reaches the callbacks in one wake, in order, where
 the client's callback group runs one callback at a time; one per wake in a reentrant group, as
-rclpy (cft_action/_feedback_intake.py)."""
+rclpy (cft_action/action/_feedback_intake.py)."""
 
 import time
 
@@ -10,7 +10,7 @@ from rclpy.qos import QoSProfile
 from test_msgs.action import Fibonacci
 
 from cft_action import ActionClient
-from cft_action._feedback_intake import FEEDBACK_BATCH
+from cft_action.action._feedback_intake import FEEDBACK_BATCH
 from harness.ros import unique_name
 from tests.support import action_server, prove_feedback_path
 

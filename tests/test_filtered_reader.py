@@ -5,10 +5,11 @@ from test_msgs.action import Fibonacci
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Int32
 
-from cft_action import ActionClient, ContentFilterError, ContentFilterOptions, filters
-from cft_action._filtered_reader import FilteredReader, ReaderFilterState
-from cft_action.goal_filter import MAX_EXPRESSION_BYTES
-from cft_action.subscription import create_filtered_subscription
+from cft_action import ActionClient, ContentFilterError, ContentFilterOptions
+from cft_action.topics import filters
+from cft_action.topics._filtered_reader import FilteredReader, ReaderFilterState
+from cft_action.action.goal_filter import MAX_EXPRESSION_BYTES
+from cft_action.topics.subscription import create_filtered_subscription
 from harness.ros import unique_name
 
 NEVER = ContentFilterOptions('data = 1 AND data = 2', [])

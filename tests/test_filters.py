@@ -2,7 +2,7 @@
 
 import pytest
 
-from cft_action.filters import (any_of, dds_literal, goal_filter_expression, never_match_on,
+from cft_action.topics.filters import (any_of, dds_literal, goal_filter_expression, never_match_on,
                                 NEVER_MATCH, uuid_prefix_term)
 
 

@@ -5,8 +5,8 @@ import uuid
 
 import pytest
 
-from cft_action.filters import NEVER_MATCH, uuid_prefix_term
-from cft_action.goal_filter import (DEFAULT_RESERVE, ExpressionTooLong, GoalFilterPlan,
+from cft_action.topics.filters import NEVER_MATCH, uuid_prefix_term
+from cft_action.action.goal_filter import (DEFAULT_RESERVE, ExpressionTooLong, GoalFilterPlan,
                                     MAX_EXPRESSION_BYTES, TAG_BYTES, TERM_BYTES)
 
 

@@ -1,8 +1,8 @@
 """The status trim: a status sample reaches Python with only the entries of the client's own goals,
 and every goal handle sees the statuses that plain rclpy would give it.
 
-The trim itself (cft_action/_status_trim.c) is checked against rclpy's own serializer; the
-client is checked against a shadow of rclpy's rule, applied at every ``execute`` to the whole
+The trim itself (cft_action/native/reader/_status_trim.c) is checked against rclpy's own serializer;
+the client is checked against a shadow of rclpy's rule, applied at every ``execute`` to the whole
 sample that the trim read, while clients in another process keep the server busy with their goals.
 """
 
@@ -23,7 +23,7 @@ from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import _rcl, ActionClient
-from cft_action.goal_filter import MODES
+from cft_action.action.goal_filter import MODES
 from harness.ros import unique_name
 from tests.support import helper_process, round_trip
 from tests.test_action_client import start_server
@@ -37,7 +37,7 @@ def entry(goal_uuid: bytes, status: int, sec: int = 0, nanosec: int = 0) -> Goal
 
 
 class Table:
-    """cft_action/_status_trim.c's table, driven directly."""
+    """cft_action/native/reader/_status_trim.c's table, driven directly."""
 
     def __init__(self) -> None:
         self.table = _rcl._lib.cft_status_table_new()

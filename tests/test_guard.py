@@ -1,5 +1,6 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
-"""Tests of the server guard: cft_action/_guard.c, cft_action.guard and ``cft-action guard``.
+"""Tests of the server guard: cft_action/native/guard/_guard.c, cft_action.guard and ``cft-action
+guard``.
 
 Three layers:
 - the library and the command line (path, acceptance command, environment);

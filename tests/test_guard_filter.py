@@ -1,11 +1,12 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
-"""The server guard's uuid filter verdicts (cft_action/_guard_filter.c) give Fast DDS's verdicts.
+"""The server guard's uuid filter verdicts (cft_action/native/guard/_guard_filter.c) give Fast DDS's
+verdicts.
 
 - The layout the guard reads (ReaderProxyData, ContentFilterProperty, SerializedPayload_t) is the
   one of the installed Fast DDS headers.
 - Its grammar compiles exactly the uuid-only expressions, and their verdicts equal those of
-  ``cft_action.sql`` (which agrees with Fast DDS: tests/test_topic_cli.py), over UUIDs that share
-  1, 2, 3 and 4 bytes with a client's tag.
+  ``cft_action.topics.sql`` (which agrees with Fast DDS: tests/test_topic_cli.py), over UUIDs that
+  share 1, 2, 3 and 4 bytes with a client's tag.
 - On the real stack, a guarded publisher with ``CFT_GUARD_VERIFY=1`` asks Fast DDS for every verdict
   it gives, and they never disagree; each reader gets exactly the samples its filter matches.
 - A filter changed while the server publishes is answered with the new filter from then on.
@@ -15,7 +16,6 @@
 
 from __future__ import annotations
 
-import ast
 import ctypes
 import itertools
 import os
@@ -29,9 +29,10 @@ import pytest
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from test_msgs.action import Fibonacci
 
-from cft_action import create_filtered_subscription, guard, set_content_filter, sql
-from cft_action.filters import MATCH_ALL, NEVER_MATCH, any_of, uuid_prefix_term
-from cft_action.message_types import message_schema
+from cft_action import create_filtered_subscription, guard, set_content_filter
+from cft_action.topics import sql
+from cft_action.topics.filters import MATCH_ALL, NEVER_MATCH, any_of, uuid_prefix_term
+from cft_action.topics.message_types import message_schema
 from harness.ros import unique_name
 from tests.support import fastdds_header_probe, helper_process
 
@@ -174,15 +175,9 @@ def test_the_layout_is_that_of_the_installed_fast_dds_headers(tmp_path: Path) ->
 
 
 def guard_sources() -> list[Path]:
-    """The C files that setup.py builds into the guard, read from its Extension."""
-    root = Path(guard.__file__).parent.parent
-    tree = ast.parse((root / 'setup.py').read_text())
-    for call in ast.walk(tree):
-        if (isinstance(call, ast.Call) and call.args and isinstance(call.args[0], ast.Constant)
-                and call.args[0].value == 'cft_action._cftguard'):
-            sources = next(k.value for k in call.keywords if k.arg == 'sources')
-            return [root / ast.literal_eval(source) for source in sources.elts]
-    return []
+    """The C files that setup.py builds into the guard: those of native/guard/ and of native/."""
+    native = Path(guard.__file__).parent / 'native'
+    return sorted((native / 'guard').glob('*.c')) + sorted(native.glob('*.c'))
 
 
 def guard_built_with(layout: dict[str, int], tmp_path: Path) -> Path:
@@ -198,7 +193,8 @@ def guard_built_with(layout: dict[str, int], tmp_path: Path) -> Path:
     (tmp_path / '_fastdds_layout.h').write_text('\n'.join(header) + '\n')
     library = tmp_path / 'libcftguard_wrong_layout.so'
     subprocess.run([compiler, '-shared', '-fPIC', '-O2', '-fvisibility=hidden', '-fexceptions',
-                    f'-I{tmp_path}', *map(str, parts), '-o', str(library), '-ldl', '-lpthread'],
+                    f'-I{tmp_path}', *sorted({f'-I{part.parent}' for part in parts}), *map(str, parts),
+                    '-o', str(library), '-ldl', '-lpthread'],
                    check=True, capture_output=True, timeout=120)
     return library
 

@@ -1,5 +1,5 @@
 """A guarded writer with rclpy's default feedback depth sends filtered readers no datagram per
-sample that is not theirs (cft_action/_guard_heartbeats.c).
+sample that is not theirs (cft_action/native/guard/_guard_heartbeats.c).
 
 A keep-last-10 writer's history is nearly always full, and Fast DDS 2.14 then heartbeats every
 reader at each write: a filtered reader, which gets none of the DATA, receives a HEARTBEAT of its

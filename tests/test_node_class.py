@@ -1,4 +1,5 @@
-"""The library's filter class for parameter events, CFT_ACTION_NODE (cft_action/_node_program.c).
+"""The library's filter class for parameter events, CFT_ACTION_NODE
+(cft_action/native/_node_program.c).
 
 A ParameterEventHandler's node filter uses it, so that only guarded nodes' writers filter: a node
 that nobody put under the guard does not know the class, sends every event, and the handler's
@@ -14,7 +15,8 @@ from rcl_interfaces.msg import ParameterEvent
 from rclpy.serialization import serialize_message
 
 from cft_action import _native, ContentFilterError, guard
-from cft_action.parameter_events import ALL_NODES, NO_NODES, node_filter, ParameterEventHandler
+from cft_action.parameters.parameter_events import (ALL_NODES, NO_NODES, node_filter,
+                                                    ParameterEventHandler)
 from harness.ros import unique_name
 from tests.support import helper_process, prove_parameter_events
 from tests.test_parameter_events import BURST, burst

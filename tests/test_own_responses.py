@@ -1,6 +1,6 @@
 """The response filter: an action client's goal, cancel and result response readers drop other
 clients' responses in DDS's receive thread, so that they never wake its executor
-(cft_action/_response_filter.c), and the client's own responses still come."""
+(cft_action/native/reader/_response_filter.c), and the client's own responses still come."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 from test_msgs.action import Fibonacci
 
 from cft_action import _rcl, ActionClient
-from cft_action.goal_filter import MODES
+from cft_action.action.goal_filter import MODES
 from harness.ros import unique_name
 from tests.support import fastdds_header_probe, helper_process, round_trip
 from tests.test_action_client import start_server
@@ -92,9 +92,9 @@ int main() { Probe::print(); }
 
 def test_a_security_build_moves_the_readers_history_and_filter_alike(tmp_path):
     """The filter finds ``RTPSReader::data_filter_`` at the headers' offset moved by the distance
-    at which the reader's history points back to it (cft_action/_response_filter.c): Fast DDS's
-    headers with and without ``HAVE_SECURITY`` (apt's build has it, the wheels' do not) move both
-    members by the same distance, within the 64 bytes searched."""
+    at which the reader's history points back to it (cft_action/native/reader/_response_filter.c):
+    Fast DDS's headers with and without ``HAVE_SECURITY`` (apt's build has it, the wheels' do not)
+    move both members by the same distance, within the 64 bytes searched."""
     plain = fastdds_header_probe(READER_PROBE % 0, tmp_path)
     secure = fastdds_header_probe(READER_PROBE % 1, tmp_path)
     move = secure[0] - plain[0]

@@ -4,6 +4,7 @@ Each check runs in a fresh interpreter (the venv's python, which sets up the ROS
 rclpy is blocked with ``sys.modules['rclpy'] = None``: any import of it raises ImportError.
 """
 
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -26,8 +27,8 @@ def run_python(code: str, *, block_rclpy: bool = True) -> subprocess.CompletedPr
 
 
 def test_pure_modules_import_without_rclpy():
-    result = run_python('import cft_action.sql, cft_action.filters, cft_action.goal_filter\n'
-                        'import cft_action.errors')
+    result = run_python('import cft_action.topics.sql, cft_action.topics.filters\n'
+                        'import cft_action.action.goal_filter, cft_action.errors')
     assert result.returncode == 0, result.stderr
     assert 'ROS MODULES: []' in result.stdout
 
@@ -43,7 +44,7 @@ def test_the_package_imports_no_ros_until_a_ros_name_is_used():
 
     result = run_python('import cft_action\nprint(cft_action.ActionClient)', block_rclpy=False)
     assert result.returncode == 0, result.stderr
-    assert "<class 'cft_action.client.ActionClient'>" in result.stdout
+    assert "<class 'cft_action.action.client.ActionClient'>" in result.stdout
     assert "'rclpy'" in result.stdout
 
 
@@ -68,3 +69,46 @@ def test_cli_help_imports_no_rclpy(argv):
     assert result.returncode == 0, result.stderr
     assert 'usage: cft-action' in result.stdout
     assert 'ROS MODULES: []' in result.stdout
+
+
+# The public modules of the flat layout before cft_action/action, parameters and topics.
+FLAT_MODULES = {
+    'client': 'action.client', 'goal_filter': 'action.goal_filter',
+    'parameter_events': 'parameters.parameter_events', 'arrival': 'topics.arrival',
+    'filters': 'topics.filters', 'message_types': 'topics.message_types',
+    'message_yaml': 'topics.message_yaml', 'sql': 'topics.sql',
+    'subscription': 'topics.subscription', 'topic_api': 'topics.topic_api',
+}
+
+
+@pytest.mark.parametrize('old, new', FLAT_MODULES.items(), ids=list(FLAT_MODULES))
+def test_a_module_of_the_flat_layout_imports_as_the_module_it_became(old, new):
+    result = run_python(f'import importlib, cft_action.{old} as old, cft_action.{new} as new\n'
+                        f'from cft_action import {old} as by_from\n'
+                        'assert old is new is by_from, (old, new)\n'
+                        f'assert new.__spec__.name == "cft_action.{new}", new.__spec__\n'
+                        'importlib.reload(new)', block_rclpy=False)
+    assert result.returncode == 0, result.stderr
+
+
+def test_every_name_the_readme_imports_resolves():
+    """Each ``from cft_action... import name`` and each dotted ``cft_action.x.y`` of README.md."""
+    readme = (Path(__file__).resolve().parent.parent / 'README.md').read_text()
+    imports = re.findall(r'^\s*from (cft_action[\w.]*) import ([\w, ]+)$', readme, re.MULTILINE)
+    dotted = set(re.findall(r'\b(cft_action(?:\.\w+)+)', readme))
+    assert imports and dotted
+    code = ['import importlib']
+    code += [f'from {module} import {names}' for module, names in imports]
+    for path in sorted(dotted):
+        # the longest module prefix of the path, then its attributes
+        code.append(f'parts = {path.split(".")!r}\n'
+                    'for i in range(len(parts), 0, -1):\n'
+                    '    try:\n'
+                    '        value = importlib.import_module(".".join(parts[:i]))\n'
+                    '        break\n'
+                    '    except ModuleNotFoundError:\n'
+                    '        pass\n'
+                    'for attribute in parts[i:]:\n'
+                    '    value = getattr(value, attribute)')
+    result = run_python('\n'.join(code), block_rclpy=False)
+    assert result.returncode == 0, result.stderr

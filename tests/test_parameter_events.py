@@ -8,9 +8,9 @@ from typing import NamedTuple, Optional
 import pytest
 from rclpy.parameter_event_handler import ParameterEventHandler as RclpyParameterEventHandler
 
-import cft_action.parameter_events
+import cft_action.parameters.parameter_events
 from cft_action import ContentFilterError, guard, is_filtered
-from cft_action.parameter_events import (ALL_NODES, NO_NODES, ParameterEventHandler,
+from cft_action.parameters.parameter_events import (ALL_NODES, NO_NODES, ParameterEventHandler,
                                          node_filter)
 from harness.ros import unique_name
 from tests.support import helper_process, prove_parameter_events
@@ -412,7 +412,7 @@ def test_use_sim_time_still_flips_the_clock(ros, start_nodes, prefix):
 
 
 def test_falls_back_when_the_rmw_has_no_content_filter(ros, monkeypatch):
-    monkeypatch.setattr(cft_action.parameter_events, 'is_content_filter_supported',
+    monkeypatch.setattr(cft_action.parameters.parameter_events, 'is_content_filter_supported',
                         lambda node: False)
     handler = ParameterEventHandler(ros.node)
     handler.add_parameter_callback('p', '/x', lambda p: None)

@@ -15,7 +15,7 @@ import pytest
 from rclpy.callback_groups import MutuallyExclusiveCallbackGroup, ReentrantCallbackGroup
 from rclpy.executors import MultiThreadedExecutor
 
-from cft_action._paused_timer import PausedTimer
+from cft_action.action._paused_timer import PausedTimer
 from harness.ros import RosSession
 
 TOGGLE_S = 3.0

@@ -6,7 +6,7 @@ import pytest
 from test_msgs.action import Fibonacci
 
 from cft_action import _rcl
-from cft_action.client import ActionClient
+from cft_action.action.client import ActionClient
 
 
 def test_a_missing_symbol_is_a_clear_error_at_load():

@@ -21,7 +21,7 @@ from test_msgs.action import Fibonacci
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import ActionClient, guard, ParameterEventHandler
-from cft_action.goal_filter import MODES
+from cft_action.action.goal_filter import MODES
 from harness.ros import RosSession, unique_name
 from tests.support import action_server, helper_process, prove_feedback_path, result_of, send
 from tests.test_action_client import make_client, PERIOD

@@ -1,12 +1,12 @@
 """The reader lock: a process that changes a filter while its reader evaluates it must not crash.
 
 Fast DDS 2.14 replaces a reader's filter expression without a lock against the reader's own
-evaluation of it in a receive thread (cft_action/_reader_lock.c, docs/INTERNALS.md section 13).
-Measured without the lock (2026-12-02): a subscriber that churned its filter against a 20 kHz
-publisher died with SIGSEGV in 4 of 4 runs of 10-20 s; a `client`-mode client sending 100 goals at
-once with caller-supplied UUIDs, with goal holding off, in 3 of 3; this test's churn crashed or hung
-in 2 of 8 runs of 10 s and passed its survival check in the rest. With the lock: none of 4
-runs of each crashed.
+evaluation of it in a receive thread (cft_action/native/reader/_reader_lock.c, docs/INTERNALS.md
+section 13). Measured without the lock (2026-12-02): a subscriber that churned its filter against a
+20 kHz publisher died with SIGSEGV in 4 of 4 runs of 10-20 s; a `client`-mode client sending 100
+goals at once with caller-supplied UUIDs, with goal holding off, in 3 of 3; this test's churn
+crashed or hung in 2 of 8 runs of 10 s and passed its survival check in the rest. With the lock:
+none of 4 runs of each crashed.
 The test therefore also asserts that the hazardous path ran: the reader evaluated its own filter
 while it changed, under the lock.
 """

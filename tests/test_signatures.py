@@ -3,9 +3,9 @@
 Fast DDS 2.14 puts ``PID_CONTENT_FILTER_INFO`` (16 bytes of signature per reader in its writer's
 filter collection) into every DATA of a writer with filtered readers, to every reader. The guard
 keeps the readers of the library's classes out of that collection and answers for them itself
-(cft_action/_guard_filter.c, "readers the guard keeps itself"): their feedback DATA must carry no
-signature, the writer must still send each of them only its own goals' feedback, and a DDS-SQL
-filter (``writer_filtering='any'``) must keep Fast DDS's behaviour, signature included.
+(cft_action/native/guard/_guard_filter.c, "readers the guard keeps itself"): their feedback DATA
+must carry no signature, the writer must still send each of them only its own goals' feedback, and a
+DDS-SQL filter (``writer_filtering='any'``) must keep Fast DDS's behaviour, signature included.
 
 The server and its clients run in processes of their own on UDP only
 (``FASTDDS_BUILTIN_TRANSPORTS=UDPv4`` with ``ROS_AUTOMATIC_DISCOVERY_RANGE=SUBNET``: with
@@ -85,9 +85,9 @@ def test_fastdds_signatures_when_the_guard_leaves_the_readers_to_it() -> None:
 
 
 def test_only_a_guarded_writer_says_it_filters_in_its_discovery_data(ros) -> None:
-    """The mark in USER_DATA (cft_action/_guard_writer_qos.c), as this process reads it
-    (cft_action/_writer_marks.c): on a guarded server's feedback writer, not on a plain one's. The
-    GID that rclpy reports is the 16 bytes the mark is recorded under."""
+    """The mark in USER_DATA (cft_action/native/guard/_guard_writer_qos.c), as this process reads it
+    (cft_action/native/reader/_writer_marks.c): on a guarded server's feedback writer, not on a
+    plain one's. The GID that rclpy reports is the 16 bytes the mark is recorded under."""
     servers = {}
     for guarded in (True, False):
         action = '/' + unique_name('cft_mark')

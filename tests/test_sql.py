@@ -1,4 +1,5 @@
-"""cft_action.sql: the DDS-SQL evaluator of the client-side fallback, with the quirks of Fast DDS.
+"""cft_action.topics.sql: the DDS-SQL evaluator of the client-side fallback, with the quirks of Fast
+DDS.
 
 Every quirk pinned here was measured against Fast DDS by test_topic_cli's agreement test.
 """
@@ -8,8 +9,8 @@ from types import SimpleNamespace as Msg
 
 import pytest
 
-from cft_action import sql
-from cft_action.sql import Kind
+from cft_action.topics import sql
+from cft_action.topics.sql import Kind
 
 
 def matches(expression, message, parameters=(), schema=None):
@@ -288,7 +289,7 @@ def test_without_a_schema_kinds_come_from_the_values():
 
 def _goal_filters():
     import random
-    from cft_action.goal_filter import GoalFilterPlan
+    from cft_action.action.goal_filter import GoalFilterPlan
     rng = random.Random(7)
     for mode in ('client', 'goals'):
         plan = GoalFilterPlan(mode, new_uuid=lambda: rng.randbytes(16))

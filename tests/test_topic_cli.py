@@ -1,8 +1,9 @@
 """`cft-action topic echo|hz|bw --content-filter|--filter`: the real CLI as a subprocess, against
 publishers.
 
-The last test checks the client-side fallback (:mod:`cft_action.sql`) against Fast DDS itself: 1,000
-random messages through real filtered subscriptions with random expressions, verdict by verdict.
+The last test checks the client-side fallback (:mod:`cft_action.topics.sql`) against Fast DDS
+itself: 1,000 random messages through real filtered subscriptions with random expressions, verdict
+by verdict.
 """
 
 from __future__ import annotations
@@ -26,10 +27,11 @@ from rclpy.serialization import deserialize_message, serialize_message
 from std_msgs.msg import String
 from test_msgs.msg import Arrays, BasicTypes, UnboundedSequences
 
-from cft_action import ContentFilterError, create_filtered_subscription, sql
-from cft_action.filters import dds_literals
-from cft_action.message_types import message_schema
-from cft_action.message_yaml import message_to_yaml
+from cft_action import ContentFilterError, create_filtered_subscription
+from cft_action.topics import sql
+from cft_action.topics.filters import dds_literals
+from cft_action.topics.message_types import message_schema
+from cft_action.topics.message_yaml import message_to_yaml
 from harness.crash import live_backtrace
 from harness.proc import Proc
 from harness.ros import unique_name
@@ -39,7 +41,7 @@ CLI = [sys.executable, '-m', 'cft_action.cli']
 # Runs the CLI as if the rmw implementation had no content filtering: the code path that a Jazzy
 # rmw without CFT (e.g. Cyclone DDS) takes, on the only rmw this machine has.
 NO_CFT_CLI = [sys.executable, '-c',
-              'import sys; import cft_action.subscription as s; '
+              'import sys; import cft_action.topics.subscription as s; '
               's.CFT_RMW_IMPLEMENTATIONS = frozenset(); '
               'from cft_action.cli import main; sys.exit(main(sys.argv[1:]))']
 RELIABLE = ['--qos-reliability', 'reliable', '--qos-depth', '1000']
@@ -421,7 +423,8 @@ def test_hz_and_bw_report_the_filtered_rate(publisher, clis):
     ('std_msgs/msg/Int32', "data = 'three'", [], 'cannot compare'),
     ('std_msgs/msg/String', "data LIKE 'a(b'", [], 'aborts the process on an invalid one'),
     ('std_msgs/msg/String', 'data = %0', ["it's"], 'bad expression parameter'),
-    # accepted by cft_action.sql, rejected by Fast DDS, whose grammar wants a space after '>='
+    # accepted by cft_action.topics.sql, rejected by Fast DDS, whose grammar wants a space after
+    # '>='
     ('std_msgs/msg/Int32', 'data >=5', [], 'rmw_fastrtps_cpp rejected it'),
 ], ids=['syntax', 'field', 'parameter', 'types', 'regex', 'quote', 'fast-dds'])
 def test_bad_expression_exits_2_naming_it(msg_type, expression, params, reason):
@@ -452,7 +455,7 @@ import sys, time
 import rclpy
 from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
-from cft_action.topic_api import get_message_class
+from cft_action.topics.topic_api import get_message_class
 
 rclpy.init()
 node = Node('cft_agreement_publisher')
@@ -687,7 +690,8 @@ def test_client_fallback_agrees_with_dds_filter(ros):
                         lambda m, into=received: into.append(m.alignment_check), qos,
                         expression, params)
                 except ContentFilterError as e:
-                    pytest.fail(f'seed {seed}: Fast DDS rejects what cft_action.sql accepts: '
+                    pytest.fail(f'seed {seed}: Fast DDS rejects what cft_action.topics.sql '
+                                'accepts: '
                                 f'{expression!r} {params}: {e}')
                 filters.append((sql.compile_filter(expression, dds_literals(params), schema),
                                 received))

@@ -1,4 +1,4 @@
-"""The library's own filter class, CFT_ACTION_UUID (cft_action/_filter_class.c).
+"""The library's own filter class, CFT_ACTION_UUID (cft_action/native/_filter_class.c).
 
 A client's feedback filter uses it, so that only a guarded server's writer filters: an unguarded
 server does not know the class, sends every sample, and the client's reader drops foreign ones.
@@ -14,7 +14,7 @@ import pytest
 from test_msgs.action import Fibonacci
 
 from cft_action import _native, _rcl, ActionClient
-from cft_action.goal_filter import GoalFilterPlan, TAG_BYTES
+from cft_action.action.goal_filter import GoalFilterPlan, TAG_BYTES
 from harness.ros import unique_name
 from tests.support import fastdds_header_probe, result_of, send
 from tests.test_action_client import make_client, start_server

@@ -9,7 +9,7 @@ Every verb module has the same face, which :mod:`cft_action.cli` builds its pars
 - ``main(args, parser, prog) -> int``: runs the verb; returns the exit status.
 
 The modules import rclpy only when ``main`` runs, so that ``--help`` stays fast. What the topic
-verbs share is in :mod:`cft_action.topic_api`.
+verbs share is in :mod:`cft_action.topics.topic_api`.
 """
 
 #: The verbs of ``cft-action topic``, each a module of this package.

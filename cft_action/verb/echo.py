@@ -14,9 +14,9 @@ from typing import Any, Callable, Optional
 
 import yaml
 
-from cft_action import topic_api
+from cft_action.topics import topic_api
 from cft_action.verb import examples
-from cft_action.message_yaml import message_to_csv, message_to_yaml
+from cft_action.topics.message_yaml import message_to_csv, message_to_yaml
 
 HELP = 'Output messages from a topic'
 

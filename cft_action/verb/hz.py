@@ -10,7 +10,7 @@ import time
 from collections import deque
 from typing import Any, Callable, Optional
 
-from cft_action import topic_api
+from cft_action.topics import topic_api
 from cft_action.verb import examples
 
 DEFAULT_WINDOW_SIZE = 10000

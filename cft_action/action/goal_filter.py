@@ -28,7 +28,7 @@ import uuid as uuid_module
 from typing import Callable, Optional
 
 from cft_action.errors import CftActionError, InvalidArgumentError
-from cft_action.filters import any_of, uuid_prefix_term
+from cft_action.topics.filters import any_of, uuid_prefix_term
 
 MODES = ('client', 'goals', 'off')
 TAG_BYTES = 4
@@ -72,7 +72,7 @@ class GoalFilterPlan:
         self._applied: frozenset[bytes] = frozenset()  # prefixes in the expression in force
         self._added_in: dict[bytes, int] = {}  # prefix in force -> the revision that added it
         # The version of the latest expression: 0 for the initial one, n for the n-th update after
-        # it. Applied one update each, it is the reader's update count (cft_action.arrival).
+        # it. Applied one update each, it is the reader's update count (cft_action.topics.arrival).
         self.revision = -1
         self._generated: set[bytes] = set()   # UUIDs this plan drew itself, matched by prefix
 

@@ -17,9 +17,9 @@ from typing import Any, Callable, Iterable
 
 from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 
-from cft_action._action_entities import ActionEntities
-from cft_action._feedback_filter import FeedbackFilter
-from cft_action._finished_goals import FinishedGoals
+from cft_action.action._action_entities import ActionEntities
+from cft_action.action._feedback_filter import FeedbackFilter
+from cft_action.action._finished_goals import FinishedGoals
 
 __all__ = ['FEEDBACK_BATCH', 'FeedbackIntake', 'MORE_FEEDBACK']
 

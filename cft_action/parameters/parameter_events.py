@@ -69,7 +69,7 @@ from rclpy.parameter_event_handler import (
 from rclpy.qos import qos_profile_parameter_events, QoSProfile
 from rclpy.qos_overriding_options import QoSOverridingOptions
 
-from cft_action._parameter_event_filter import (
+from cft_action.parameters._parameter_event_filter import (
     ALL_NODES,
     NO_NODES,
     node_filter,
@@ -78,8 +78,8 @@ from cft_action._parameter_event_filter import (
     ParameterEventFilterState,
 )
 from cft_action._rclpy_compat import PromptLogger, set_parameter_event_callbacks
-from cft_action.filters import ContentFilterOptions, Literal
-from cft_action.subscription import is_content_filter_supported
+from cft_action.topics.filters import ContentFilterOptions, Literal
+from cft_action.topics.subscription import is_content_filter_supported
 
 __all__ = [
     'ALL_NODES', 'NO_NODES', 'ParameterEventFilterState', 'ParameterEventHandler',

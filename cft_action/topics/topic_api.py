@@ -15,8 +15,8 @@ Two filters, in ros2cli's terms:
   prints no message: there is no silent fallback to unfiltered messages.
   ``--content-filter-fallback=client`` is the explicit opt-in to evaluating the expression in this
   process when the rmw implementation has no content filtering. Filters are checked against
-  :func:`cft_action.message_types.message_schema`, the kinds of a message's fields as Fast DDS
-  sees them.
+  :func:`cft_action.topics.message_types.message_schema`, the kinds of a message's fields as Fast
+  DDS sees them.
 - ``--filter EXPR`` is Jazzy's ``ros2 topic echo|hz`` option: a Python expression on the message
   ``m``, evaluated in this process on the messages that passed the content filter.
 """
@@ -33,9 +33,9 @@ import sys
 import time
 from typing import Any, Callable, Optional
 
-from cft_action import sql
+from cft_action.topics import sql
 from cft_action.errors import CftActionError
-from cft_action.message_types import is_message, message_schema
+from cft_action.topics.message_types import is_message, message_schema
 
 __all__ = [
     'EXIT_ERROR', 'EXIT_FILTER', 'Deadline', 'FilterUnavailable', 'Session', 'TopicToolError',
@@ -204,14 +204,15 @@ def subscribe(session: Session, topic: str, msg_type, qos, callback: Callable[..
     FilterUnavailable.
 
     ``callback`` takes the message and its message info, as an rclpy subscription's callback with
-    two parameters. The expression is checked first by :mod:`cft_action.sql`, so that a bad one is
-    reported with its reason and a LIKE pattern that would abort Fast DDS never reaches it. With
+    two parameters. The expression is checked first by :mod:`cft_action.topics.sql`, so that a bad
+    one is reported with its reason and a LIKE pattern that would abort Fast DDS never reaches it.
+    With
     ``--content-filter-fallback=client`` and an rmw implementation without content filtering, the
     expression is evaluated here on each message instead, and a warning says so.
     """
     import rclpy
-    from cft_action.filters import dds_literals
-    from cft_action.subscription import (ContentFilterError, create_filtered_subscription,
+    from cft_action.topics.filters import dds_literals
+    from cft_action.topics.subscription import (ContentFilterError, create_filtered_subscription,
                                          is_content_filter_supported)
 
     # Fast DDS rejects an expression that starts or ends with a space, which a shell makes easy

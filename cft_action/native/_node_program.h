@@ -1,7 +1,7 @@
 // Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 //
 // A /parameter_events filter by node name, for the CFT_ACTION_NODE class (_filter_class.h). Its
-// expressions are the DDS-SQL that cft_action.parameter_events writes, with the names inline:
+// expressions are the DDS-SQL that cft_action.parameters.parameter_events writes, with the names inline:
 //     expr  := node = node                          every event
 //            | node = node AND node <> node         no event
 //            | term ( OR term )*

@@ -5,7 +5,7 @@ rcl has no accessor for them, so they are found by layout and checked (docs/INTE
 3). The action client filters the feedback subscription, and takes feedback and result responses
 here rather than through rclpy, whose takes drop the sample info: the source timestamps tell
 whether the server published a feedback message before or after the goal's result. Status is
-taken by :mod:`cft_action._goal_status`.
+taken by :mod:`cft_action.action._goal_status`.
 """
 
 from __future__ import annotations

@@ -4,7 +4,7 @@
 A filter update travels by discovery and a goal request by the goal service, so the request can
 overtake the update at the server, whose feedback writer then drops the goal's first feedback with
 its old filter (docs/INTERNALS.md, "Proof of arrival"). The action client therefore holds such a
-request until its :class:`cft_action.arrival.ArrivalGate` has proven the version, polling the
+request until its :class:`cft_action.topics.arrival.ArrivalGate` has proven the version, polling the
 gate from a timer of the client's callback group, and sends the held requests in call order.
 
 A proof that does not come within the timeout is not waited for again: from then on goals go out
@@ -26,10 +26,10 @@ from rclpy.qos import QoSProfile
 from rclpy.task import Future
 from unique_identifier_msgs.msg import UUID
 
-from cft_action._paused_timer import PausedTimer
+from cft_action.action._paused_timer import PausedTimer
 from cft_action._rclpy_compat import PromptLogger
-from cft_action.arrival import ArrivalGate, ProbeTarget
-from cft_action.goal_filter import random_uuid4
+from cft_action.topics.arrival import ArrivalGate, ProbeTarget
+from cft_action.action.goal_filter import random_uuid4
 
 __all__ = ['HeldGoal', 'HeldGoals', 'cancel_goal_probe']
 

@@ -1,21 +1,21 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 """The action client's feedback filter: its goal plan and its filtered reader, kept in step.
 
-:class:`cft_action.goal_filter.GoalFilterPlan` decides which expression the goals need, and
-:class:`cft_action._filtered_reader.FilteredReader` is the one way to set it; this object applies
-each of the plan's expressions as one update of the reader, so the plan's revision is the reader's
-update count, the version that :class:`cft_action.arrival.ArrivalGate` proves. Where a change
-fails, the filter is abandoned for good and the client behaves as plain rclpy.
+:class:`cft_action.action.goal_filter.GoalFilterPlan` decides which expression the goals need, and
+:class:`cft_action.topics._filtered_reader.FilteredReader` is the one way to set it; this object
+applies each of the plan's expressions as one update of the reader, so the plan's revision is the
+reader's update count, the version that :class:`cft_action.topics.arrival.ArrivalGate` proves. Where
+a change fails, the filter is abandoned for good and the client behaves as plain rclpy.
 """
 
 from __future__ import annotations
 
 from typing import Any, Callable, ContextManager, Iterable, Optional
 
-from cft_action._filtered_reader import FilteredReader
+from cft_action.topics._filtered_reader import FilteredReader
 from cft_action._rclpy_compat import PromptLogger
-from cft_action.filters import ContentFilterOptions, MATCH_ALL
-from cft_action.goal_filter import ExpressionTooLong, GoalFilterPlan, random_uuid4
+from cft_action.topics.filters import ContentFilterOptions, MATCH_ALL
+from cft_action.action.goal_filter import ExpressionTooLong, GoalFilterPlan, random_uuid4
 
 __all__ = ['FeedbackFilter']
 

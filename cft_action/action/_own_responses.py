@@ -4,9 +4,9 @@
 A server's response writer sends each response to every client of the service, and rmw_fastrtps
 discards those for other clients only when the executor, woken by them, takes them. The response
 readers of rcl's action client get a filter of the library's as rclpy creates them
-(cft_action/_response_filter.c): it drops, in DDS's receive thread, each response whose related
-sample identity names another participant, a subset of what rmw's take discards, so the client
-gets exactly the responses it got before (docs/INTERNALS.md section 23).
+(cft_action/native/reader/_response_filter.c): it drops, in DDS's receive thread, each response
+whose related sample identity names another participant, a subset of what rmw's take discards, so
+the client gets exactly the responses it got before (docs/INTERNALS.md section 23).
 """
 
 from __future__ import annotations

@@ -16,7 +16,7 @@ from typing import Any, Callable
 from rclpy.callback_groups import CallbackGroup
 from rclpy.node import Node
 
-from cft_action._paused_timer import PausedTimer
+from cft_action.action._paused_timer import PausedTimer
 
 __all__ = ['FinishedGoals']
 

@@ -3,7 +3,7 @@
 
 Kilted's rclpy has ``ContentFilterOptions`` and ``Subscription.set_content_filter``; Jazzy's has
 neither. These functions give the same capability on Jazzy, through the package's one
-filter-changing module, :mod:`cft_action._filtered_reader`.
+filter-changing module, :mod:`cft_action.topics._filtered_reader`.
 
 rmw_fastrtps destroys and recreates the DataReader on the first non-empty filter, and again when the
 filter is set back to ``""``. A recreation while an executor waits on the subscription is a
@@ -26,13 +26,13 @@ from rclpy.qos_overriding_options import QoSOverridingOptions
 from rclpy.subscription import Subscription
 from rclpy.type_support import check_is_valid_msg_type
 
-from cft_action._filtered_reader import apply_filter, get_filter, has_filter, set_filter
-from cft_action.message_types import first_primitive_field
+from cft_action.topics._filtered_reader import apply_filter, get_filter, has_filter, set_filter
+from cft_action.topics.message_types import first_primitive_field
 from cft_action._rclpy_compat import (declare_qos_parameters, new_rcl_subscription,
                                       register_subscription, validate_qos_or_depth,
                                       validate_topic_name)
 from cft_action.errors import ContentFilterError, InvalidArgumentError
-from cft_action.filters import ContentFilterOptions, Literal, never_match_on
+from cft_action.topics.filters import ContentFilterOptions, Literal, never_match_on
 
 __all__ = [
     'ContentFilterError', 'ContentFilterOptions', 'create_filtered_subscription',
@@ -116,7 +116,8 @@ def create_filtered_subscription(
     :param filter_expression: A DDS-SQL expression over the message fields, for example
         ``"data > %0"``. Array members must be indexed: ``"goal_id.uuid[0] = 7"``.
     :param expression_parameters: Values for ``%0`` .. ``%99``. Python values and bare strings are
-        turned into DDS literals by :func:`cft_action.filters.dds_literal`: ``hello`` is sent as
+        turned into DDS literals by :func:`cft_action.topics.filters.dds_literal`: ``hello`` is sent
+        as
         ``'hello'``.
     :param content_filter_options: The filter as Kilted's ``Node.create_subscription`` takes it,
         ``ContentFilterOptions(filter_expression, expression_parameters)``, instead of the two

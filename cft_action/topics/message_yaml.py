@@ -14,7 +14,7 @@ from typing import Optional
 
 import yaml
 
-from cft_action.message_types import fields_of, is_message, type_name
+from cft_action.topics.message_types import fields_of, is_message, type_name
 
 __all__ = ['message_to_csv', 'message_to_ordereddict', 'message_to_yaml']
 

@@ -15,7 +15,7 @@ created *after* the change, proves that every writer there has processed the cha
   versions the writers are proven to apply. The parameter event handler waits on it in a blocking
   loop (:meth:`ArrivalGate.wait`); the action client polls it from a timer of its own callback
   group (:meth:`ArrivalGate.begin`, :meth:`ArrivalGate.poll`), while its goal requests wait in
-  :class:`cft_action._held_goals.HeldGoals`.
+  :class:`cft_action.action._held_goals.HeldGoals`.
 """
 
 from __future__ import annotations

@@ -5,10 +5,10 @@ An action server's ``GoalStatusArray`` lists every goal it holds, finished ones 
 ``result_timeout``, and goes to every client at every transition of any goal. rclpy converts the
 whole array to Python on every take and then looks each entry up among its goal handles, so a
 client pays for every goal of every client. Here the sample is taken serialized and trimmed
-natively (cft_action/_status_trim.c) to the entries that can change one of this client's goal
-handles: those of goals whose response has not been executed yet, and for goals with a handle,
-each change of status once. rclpy's ``execute`` then sets exactly the statuses it would have set
-from the whole array, since setting a handle's status again to the same value changes nothing
+natively (cft_action/native/reader/_status_trim.c) to the entries that can change one of this
+client's goal handles: those of goals whose response has not been executed yet, and for goals with a
+handle, each change of status once. rclpy's ``execute`` then sets exactly the statuses it would have
+set from the whole array, since setting a handle's status again to the same value changes nothing
 (docs/INTERNALS.md, "Status, trimmed to the client's goals").
 
 The status subscription is found inside rcl's action client by layout and checked by its topic
@@ -23,7 +23,7 @@ from action_msgs.msg import GoalStatus
 from rclpy.serialization import deserialize_message
 
 from cft_action import _rcl
-from cft_action._action_entities import ActionEntities
+from cft_action.action._action_entities import ActionEntities
 from cft_action._rclpy_compat import PromptLogger
 from cft_action.errors import ContentFilterError
 
@@ -93,7 +93,8 @@ class OwnGoalStatus:
     def filter_reader(self) -> None:
         """Make the status reader drop samples that can change none of this client's goal handles:
         those that list no goal of this client whose response is pending, nor one whose status
-        differs from the last sample that the reader passed (cft_action/_status_trim.c).
+        differs from the last sample that the reader passed
+        (cft_action/native/reader/_status_trim.c).
 
         rmw_fastrtps recreates the DataReader for its first filter (docs/INTERNALS.md section 4),
         so this must run before any executor waits on the subscription. No writer knows the class

@@ -4,7 +4,7 @@
 The handler's callbacks decide which expression is wanted (the watched nodes, every node while a
 node-agnostic callback is registered, or the user's own), :class:`FilteredReader` sets it, and an
 :class:`ArrivalGate` proves that the publishers of other processes apply it. See
-:mod:`cft_action.parameter_events` for what is filtered where, and why.
+:mod:`cft_action.parameters.parameter_events` for what is filtered where, and why.
 """
 
 from __future__ import annotations
@@ -20,13 +20,13 @@ from rclpy.node import Node
 from rclpy.subscription import Subscription
 
 from cft_action import _rcl
-from cft_action._filtered_reader import filter_class_for, FilteredReader
+from cft_action.topics._filtered_reader import filter_class_for, FilteredReader
 from cft_action._rclpy_compat import PromptLogger
-from cft_action.arrival import ArrivalGate, ProbeTarget, RemotePublishers
+from cft_action.topics.arrival import ArrivalGate, ProbeTarget, RemotePublishers
 from cft_action.errors import ContentFilterError
-from cft_action.filters import (ContentFilterOptions, dds_literal, dds_literals, Literal,
+from cft_action.topics.filters import (ContentFilterOptions, dds_literal, dds_literals, Literal,
                                 never_match_on)
-from cft_action.subscription import subscribe_filtered
+from cft_action.topics.subscription import subscribe_filtered
 
 __all__ = ['ALL_NODES', 'NO_NODES', 'PARAMETER_EVENTS_TOPIC', 'ParameterEventFilter',
            'ParameterEventFilterState', 'node_filter']
@@ -156,7 +156,7 @@ class ParameterEventFilter:
     :param logger: The handler's logger.
     :param writer_filtering: ``'guarded'``: the library's node filter class, which only guarded
         nodes' writers evaluate; ``'any'``: DDS-SQL, which every node's writer evaluates. Its
-        environment variable wins (:func:`cft_action._filtered_reader.filter_class_for`).
+        environment variable wins (:func:`cft_action.topics._filtered_reader.filter_class_for`).
     """
 
     def __init__(self, node: Node, logger: PromptLogger, writer_filtering: str = 'guarded') -> None:

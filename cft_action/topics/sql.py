@@ -27,8 +27,8 @@ it (``tests/test_topic_cli.py`` checks this against real filtered subscriptions)
   names, as Fast DDS does.
 
 Field kinds come from a *schema*, a callable that maps a field path to a :class:`Kind` (see
-:func:`cft_action.message_types.message_schema` for ROS messages); without one, kinds are inferred
-from the values of each message, which cannot tell ``float32`` from ``float64``.
+:func:`cft_action.topics.message_types.message_schema` for ROS messages); without one, kinds are
+inferred from the values of each message, which cannot tell ``float32`` from ``float64``.
 """
 
 from __future__ import annotations
@@ -776,7 +776,7 @@ def compile_filter(expression: str, parameters: Iterable[str] = (),
 
     :param expression: A DDS-SQL filter expression.
     :param parameters: The values of ``%0`` .. ``%99`` as DDS literals (strings quoted: ``'a'``);
-        :func:`cft_action.filters.dds_literal` makes them. Only the ones used are parsed.
+        :func:`cft_action.topics.filters.dds_literal` makes them. Only the ones used are parsed.
     :param schema: Gives the kind of each field, and raises :class:`LookupError` with the reason
         for a field that does not exist or is not primitive; without it kinds are inferred from each
         message.
@@ -870,10 +870,11 @@ def compile_filter(expression: str, parameters: Iterable[str] = (),
     return result
 
 
-# The shape of the action client's goal filters (cft_action.filters.any_of of uuid_prefix_term):
-# equalities of a field with a small decimal integer, ANDed, and conjunctions in parentheses ORed.
-# It has no string, parameter, pattern or literal out of range, and its grammar is that of
-# _TOKEN and parse: every expression of this shape compiles (tests/test_sql.py checks both ways).
+# The shape of the action client's goal filters (cft_action.topics.filters.any_of of
+# uuid_prefix_term): equalities of a field with a small decimal integer, ANDed, and conjunctions in
+# parentheses ORed. It has no string, parameter, pattern or literal out of range, and its grammar is
+# that of _TOKEN and parse: every expression of this shape compiles (tests/test_sql.py checks both
+# ways).
 _KEYWORD = f'(?:{"|".join(_KEYWORDS)})'
 _EQUALITY = (rf'(?!{_KEYWORD}\b)[A-Za-z_]\w*(?:\[\d{{1,9}}\])?'
              rf'(?:\.(?!{_KEYWORD}\b)[A-Za-z_]\w*(?:\[\d{{1,9}}\])?)* = (?:0|[1-9]\d{{0,17}})')

@@ -29,19 +29,20 @@ from rclpy.task import Future
 from unique_identifier_msgs.msg import UUID
 
 from cft_action import _rcl
-from cft_action._action_entities import ActionEntities
-from cft_action._feedback_filter import FeedbackFilter
-from cft_action._feedback_intake import FeedbackIntake, MORE_FEEDBACK
-from cft_action._filtered_reader import filter_class_for, WRITER_FILTERING, WRITER_FILTERING_ENV
-from cft_action._finished_goals import FinishedGoals
-from cft_action._goal_status import GoalStatusState, OwnGoalStatus
-from cft_action._held_goals import cancel_goal_probe, HeldGoal, HeldGoals
-from cft_action._own_responses import OwnResponses, ResponseFilterState
+from cft_action.action._action_entities import ActionEntities
+from cft_action.action._feedback_filter import FeedbackFilter
+from cft_action.action._feedback_intake import FeedbackIntake, MORE_FEEDBACK
+from cft_action.topics._filtered_reader import (filter_class_for, WRITER_FILTERING,
+                                                WRITER_FILTERING_ENV)
+from cft_action.action._finished_goals import FinishedGoals
+from cft_action.action._goal_status import GoalStatusState, OwnGoalStatus
+from cft_action.action._held_goals import cancel_goal_probe, HeldGoal, HeldGoals
+from cft_action.action._own_responses import OwnResponses, ResponseFilterState
 from cft_action._rclpy_compat import CompatActionClient, PromptLogger
-from cft_action.arrival import ArrivalGate, RemotePublishers
+from cft_action.topics.arrival import ArrivalGate, RemotePublishers
 from cft_action.errors import InvalidArgumentError
-from cft_action.goal_filter import MODES
-from cft_action.subscription import is_content_filter_supported
+from cft_action.action.goal_filter import MODES
+from cft_action.topics.subscription import is_content_filter_supported
 
 __all__ = ['ActionClient', 'FeedbackFilterState', 'FEEDBACK_FILTER_ENV', 'GoalStatusState',
            'MORE_FEEDBACK', 'ResponseFilterState', 'WRITER_FILTERING_ENV', 'WRITER_FILTERING']

@@ -14,9 +14,9 @@ them. Every filtered reader of the package therefore follows one rule, kept here
   place (:meth:`FilteredReader.abandon`); the owner then behaves as unfiltered rclpy, for good, and
   the reason is in its state.
 
-Every expression passes :mod:`cft_action.sql` before it reaches rcl: Fast DDS terminates the process
-on a ``LIKE`` or ``MATCH`` pattern that its regex engine rejects. Setting and reading a filter hold
-one process-wide lock, because rcl documents those functions as not thread-safe;
+Every expression passes :mod:`cft_action.topics.sql` before it reaches rcl: Fast DDS terminates the
+process on a ``LIKE`` or ``MATCH`` pattern that its regex engine rejects. Setting and reading a
+filter hold one process-wide lock, because rcl documents those functions as not thread-safe;
 :func:`has_filter` takes none: ``rcl_subscription_is_cft_enabled`` reads one ``bool`` of the
 subscription (``rmw_subscription_t.is_cft_enabled``), which only the rmw's set call, made under the
 lock, writes.
@@ -33,10 +33,11 @@ from typing import Any, Callable, ContextManager, Iterable, NamedTuple, Optional
 
 import rclpy
 
-from cft_action import _rcl, sql
+from cft_action import _rcl
+from cft_action.topics import sql
 from cft_action._rclpy_compat import PromptLogger
 from cft_action.errors import ContentFilterError, InvalidArgumentError
-from cft_action.filters import ContentFilterOptions, dds_literals, Literal
+from cft_action.topics.filters import ContentFilterOptions, dds_literals, Literal
 
 __all__ = ['FilteredReader', 'ReaderFilterState', 'get_filter', 'has_filter', 'set_filter']
 
@@ -49,8 +50,8 @@ def set_filter(subscription_ptr: int, topic: str, expression: str,
 
     :return: the filter as set, its parameters quoted as DDS literals.
     :raises ContentFilterError: naming the expression and the topic, with rcl's error string, if
-        the expression is empty, a parameter cannot be quoted, :mod:`cft_action.sql` rejects the
-        expression, rcl fails, or the rmw does not apply it.
+        the expression is empty, a parameter cannot be quoted, :mod:`cft_action.topics.sql` rejects
+        the expression, rcl fails, or the rmw does not apply it.
     """
     return apply_filter(subscription_ptr, topic, expression, expression_parameters)[0]
 
@@ -63,16 +64,16 @@ def apply_filter(subscription_ptr: int, topic: str, expression: str,
 
     :return: the filter as set, and the filter object it created in this process, if any.
     :raises ContentFilterError: naming the expression and the topic, with rcl's error string, if
-        the expression is empty, a parameter cannot be quoted, :mod:`cft_action.sql` rejects the
-        expression, rcl fails, or the rmw does not apply it.
+        the expression is empty, a parameter cannot be quoted, :mod:`cft_action.topics.sql` rejects
+        the expression, rcl fails, or the rmw does not apply it.
     """
     if not expression:
         raise ContentFilterError(
             f'refusing to set an empty filter expression on {topic}: rmw_fastrtps would destroy '
             'and recreate the DataReader, which is a use-after-free under a waiting executor. To '
             'receive nothing, set an expression that never matches '
-            '(cft_action.filters.never_match_on(field)); to receive everything, one that always '
-            'does, or create an unfiltered subscription')
+            '(cft_action.topics.filters.never_match_on(field)); to receive everything, one that '
+            'always does, or create an unfiltered subscription')
     try:
         parameters = dds_literals(expression_parameters)
     except (TypeError, ValueError) as e:
@@ -173,8 +174,8 @@ class FilteredReader:
         ``'feedback filter not used, all feedback is received as with rclpy'``.
     :param match_all: an expression that every sample of the topic matches.
     :param filter_class: filter with this one of the library's own filter classes
-        (cft_action/_filter_class.h), which only guarded writers know, instead of DDS-SQL, which
-        every Fast DDS writer evaluates; the expressions must then be in that class's grammar.
+        (cft_action/native/_filter_class.h), which only guarded writers know, instead of DDS-SQL,
+        which every Fast DDS writer evaluates; the expressions must then be in that class's grammar.
     """
 
     def __init__(self, logger: PromptLogger, *, unfiltered: str, match_all: str,
@@ -228,7 +229,7 @@ class FilteredReader:
         """Take over a subscription that was created with ``options`` as its first filter.
 
         :param created: the filter object of :attr:`filter_class` that this process created for
-            it, if any (:func:`cft_action.subscription.subscribe_filtered`).
+            it, if any (:func:`cft_action.topics.subscription.subscribe_filtered`).
         """
         with self.lock:
             self._topic = topic

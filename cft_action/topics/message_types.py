@@ -2,8 +2,8 @@
 """ROS message types as rosidl describes them: their fields, their classes, their DDS-SQL kinds.
 
 One walk over a type's ``SLOT_TYPES`` serves every user: :func:`message_schema` for
-:mod:`cft_action.sql`, :func:`first_primitive_field` for the filter probe of
-:func:`cft_action.create_filtered_subscription`, and :mod:`cft_action.message_yaml`.
+:mod:`cft_action.topics.sql`, :func:`first_primitive_field` for the filter probe of
+:func:`cft_action.create_filtered_subscription`, and :mod:`cft_action.topics.message_yaml`.
 rosidl_parser is imported only when a type is walked.
 """
 
@@ -13,7 +13,7 @@ import importlib
 import re
 from typing import Any, Iterator, Optional
 
-from cft_action import sql
+from cft_action.topics import sql
 
 __all__ = ['class_of', 'fields_of', 'first_primitive_field', 'is_message', 'message_schema',
            'type_name']
@@ -86,7 +86,7 @@ def _slot_kind(slot: Any) -> sql.Kind:
 
 
 def message_schema(msg_type: Any) -> sql.Schema:
-    """The :data:`cft_action.sql.Schema` of a ROS message type: the kind of each field path.
+    """The :data:`cft_action.topics.sql.Schema` of a ROS message type: the kind of each field path.
 
     It applies Fast DDS's rules: arrays and sequences must be indexed, a fixed-size array's index
     must be within its size, and the field at the end of the path must be primitive.
