@@ -14,11 +14,12 @@ Bytes are real network bytes when network namespaces can be made (root and iprou
 then has a namespace and an interface of its own. Otherwise they are estimated from the message
 counts, and the output says so.
 
-The server keeps every feedback sample of a phase unless ``--server-feedback-depth N`` gives its
-feedback writer rclpy's keep-last N (10 by default in rclpy): with a full history Fast DDS
-heartbeats every reader at every write, which the guard narrows (docs/INTERNALS.md, section 22).
+The server's feedback writer keeps rclpy's default of 10 samples, as a user's server does
+(``--server-feedback-depth N``; ``all`` keeps every sample of a phase, which flatters the bytes:
+with a full keep-last history Fast DDS heartbeats every reader at every write, which the guard
+narrows; docs/INTERNALS.md, section 22).
 
-Usage: ``python -m demos.load_demo [--clients 8] [--goals 4] [--order 500] [--rate 100]
+Usage: ``python -m demos.load_demo [--clients 8] [--goals 4] [--order 1000] [--rate 100]
 [--server-feedback-depth 10] ...``
 """
 
@@ -35,6 +36,9 @@ from typing import Optional, Sequence
 
 from harness import load
 from harness.cli import add_server_feedback_depth
+
+#: rclpy's default feedback depth (``ActionServer``'s ``feedback_pub_qos_profile``, keep-last 10).
+RCLPY_FEEDBACK_DEPTH = 10
 
 DEFAULT_OUTPUT = Path(__file__).resolve().parent.parent / 'demo-output'
 
@@ -60,7 +64,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--output', type=Path, default=DEFAULT_OUTPUT,
                         help='directory for load_demo.png and load_demo.json')
     parser.add_argument('--no-plot', action='store_true', help='skip the PNG')
-    add_server_feedback_depth(parser)
+    add_server_feedback_depth(parser, default=RCLPY_FEEDBACK_DEPTH)
     args = parser.parse_args(argv)
     args.configs = [c.strip() for c in args.configs.split(',') if c.strip()]
     args.unguarded = [c.strip() for c in args.unguarded.split(',') if c.strip()]

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import argparse
-from typing import Callable, Iterable
+from typing import Callable, Iterable, Optional
 
 
 def int_list(text: str) -> list[int]:
@@ -31,10 +31,19 @@ def name_list(known: Iterable[str]) -> Callable[[str], list[str]]:
     return parse
 
 
-def add_server_feedback_depth(parser: argparse.ArgumentParser) -> None:
-    """``--server-feedback-depth N``: the load server's feedback writer alone keeps N samples
-    (:attr:`harness.load.LoadSpec.server_feedback_depth`)."""
-    parser.add_argument('--server-feedback-depth', type=int, default=None,
+def feedback_depth(text: str) -> Optional[int]:
+    """``'10'`` -> 10; ``'all'`` -> None (the feedback writer as deep as every queue)."""
+    return None if text.strip().lower() == 'all' else int(text)
+
+
+def add_server_feedback_depth(parser: argparse.ArgumentParser,
+                              default: Optional[int] = None) -> None:
+    """``--server-feedback-depth N|all``: the load server's feedback writer alone keeps N samples
+    (:attr:`harness.load.LoadSpec.server_feedback_depth`); ``all``: as deep as every queue, which
+    holds all of a phase's feedback. ``default`` None is ``all``."""
+    # A string default goes through ``type`` too: the help then shows ``all`` rather than None.
+    parser.add_argument('--server-feedback-depth', type=feedback_depth, metavar='N|all',
+                        default='all' if default is None else str(default),
                         help="the server's feedback writer alone keeps this many samples (rclpy's "
-                             'default: 10); default: as deep as every queue, which holds all of a '
+                             "default: 10); all: as deep as every queue, which holds all of a "
                              "phase's feedback")
