@@ -53,7 +53,8 @@ bench: $(STAMP)
 # `make test`. Each stack is a prebuilt directory COMPAT_CACHE/<stack> (what it holds:
 # docs/COMPATIBILITY.md, "The stacks"); a missing one fails the run. The tests take 3-4 minutes a
 # stack. Results: COMPAT_CACHE/results/<stack>-<time>/.
-COMPAT_CACHE ?= /work/.cache/cft-stack
+# The cache of built stacks: $XDG_CACHE_HOME/cft-stack, else ~/.cache/cft-stack.
+COMPAT_CACHE ?= $(or $(XDG_CACHE_HOME),$(HOME)/.cache)/cft-stack
 COMPAT_STACKS ?= apt-2.14.6 head-2.14.x
 COMPAT_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_uuid_class.py \
     tests/test_node_class.py tests/test_action_client.py

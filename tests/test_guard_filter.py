@@ -193,8 +193,8 @@ def guard_built_with(layout: dict[str, int], tmp_path: Path) -> Path:
     (tmp_path / '_fastdds_layout.h').write_text('\n'.join(header) + '\n')
     library = tmp_path / 'libcftguard_wrong_layout.so'
     subprocess.run([compiler, '-shared', '-fPIC', '-O2', '-fvisibility=hidden', '-fexceptions',
-                    f'-I{tmp_path}', *sorted({f'-I{part.parent}' for part in parts}), *map(str, parts),
-                    '-o', str(library), '-ldl', '-lpthread'],
+                    f'-I{tmp_path}', *sorted({f'-I{part.parent}' for part in parts}),
+                    *map(str, parts), '-o', str(library), '-ldl', '-lpthread'],
                    check=True, capture_output=True, timeout=120)
     return library
 

@@ -41,7 +41,8 @@ def test_layout_check_finds_the_result_client_and_takes_nothing_from_empty_queue
     missing, reason = _rcl.action_result_client(pointer, '/another_action')
     assert missing is None and 'layout check failed' in reason
     with client:
-        assert client._entities.take_result() == (None, None, 0)
+        data: dict = {}
+        assert client._entities.take_result_into(data) == 0 and data == {}
         assert client._entities.take_feedback() == (None, 0)
     client.destroy()
 

@@ -53,11 +53,17 @@ class ActionEntities:
         """Whether feedback and result responses are taken here, with their source timestamps."""
         return self.result_client is not None
 
-    def take_result(self) -> tuple[Optional[int], Optional[Any], int]:
-        """``(sequence_number, response, source_timestamp)``; ``(None, None, 0)`` if none came."""
+    def take_result_into(self, data: dict) -> int:
+        """Take a result response into ``data['result']`` as rclpy's take_data puts it,
+        ``(sequence_number, response)``; return its source timestamp, or 0 if none came."""
         if self.result_client is None or self._result_support is None:
-            return None, None, 0
-        return _rcl.take_response(self.result_client, self._result_support)
+            return 0
+        sequence_number, response, stamp = _rcl.take_response(self.result_client,
+                                                               self._result_support)
+        if response is None or sequence_number is None:
+            return 0
+        data['result'] = (sequence_number, response)
+        return stamp
 
     def take_feedback(self) -> tuple[Optional[Any], int]:
         """``(feedback_message, source_timestamp)``; ``(None, 0)`` if none came."""

@@ -10,14 +10,59 @@ a change fails, the filter is abandoned for good and the client behaves as plain
 
 from __future__ import annotations
 
-from typing import Any, Callable, ContextManager, Iterable, Optional
+from typing import Any, Callable, ContextManager, Iterable, NamedTuple, Optional
 
 from cft_action.topics._filtered_reader import FilteredReader
 from cft_action._rclpy_compat import PromptLogger
 from cft_action.topics.filters import ContentFilterOptions, MATCH_ALL
 from cft_action.action.goal_filter import ExpressionTooLong, GoalFilterPlan, random_uuid4
 
-__all__ = ['FeedbackFilter']
+__all__ = ['FeedbackFilter', 'FeedbackFilterState']
+
+
+class FeedbackFilterState(NamedTuple):
+    """A snapshot of an :class:`ActionClient`'s feedback filter.
+
+    :ivar mode: ``'client'``, ``'goals'`` or ``'off'``.
+    :ivar active: whether the middleware filters the feedback subscription.
+    :ivar reason: why the filter is not active; empty when it is.
+    :ivar expression: the filter expression in force; empty when not active.
+    :ivar updates: filter changes sent after the first installation; each is an event at the
+        server's writer.
+    :ivar live_goals: goals that hold an exact term in the expression.
+    :ivar feedback_taken: feedback messages taken from rcl by this client.
+    :ivar feedback_dropped: of those, messages not given to a callback: there was none for their
+        goal, or the server published them after the goal's result.
+    :ivar confirmed: whether the server's feedback writer is known to apply every term that a goal
+        sent so far needs. A goal whose term came with an update is held until it is.
+    :ivar held_goals: goal requests that were held for that proof, since construction.
+    :ivar arrival_timeouts: times the proof did not come within ``FILTER_ARRIVAL_TIMEOUT`` and the
+        held goals were sent without it.
+    :ivar holds_suspended: whether, since such a timeout, goals are sent at once, without a
+        proof, as rclpy sends them: a client waits for a proof that does not come only once, and
+        holds goals again once a proof, which goes on in the background, has come.
+    :ivar filtered_in: where other goals' feedback is dropped: ``'writer'`` (the server's writer
+        does not send it: a guarded server, or ``writer_filtering='any'``), ``'reader'`` (it
+        crosses the network and this client's DDS reader drops it before Python: an unguarded
+        server), ``'none'`` (not filtered: rclpy drops it in Python), or ``'unknown'`` (no
+        feedback has arrived yet, or this process discovered the server before its first use of
+        cft_action, which then cannot read the server's discovery data, where a guarded server
+        says that it filters).
+    """
+
+    mode: str
+    active: bool
+    reason: str
+    expression: str
+    updates: int
+    live_goals: int
+    feedback_taken: int
+    feedback_dropped: int
+    confirmed: bool = True
+    held_goals: int = 0
+    arrival_timeouts: int = 0
+    filtered_in: str = 'unknown'
+    holds_suspended: bool = False
 
 
 class FeedbackFilter:
@@ -123,6 +168,17 @@ class FeedbackFilter:
             self.reader.update(ContentFilterOptions(expression, []))
             if self.reader.filter is None:
                 self.plan = None
+
+    def state(self, feedback_taken: int, feedback_dropped: int,
+              writers: Callable[[], Iterable[Any]], **proof: Any) -> FeedbackFilterState:
+        """A snapshot of the filter, with the client's counters and its proof state (``confirmed``,
+        ``held_goals``, ``arrival_timeouts``, ``holds_suspended``)."""
+        common = self.reader.state
+        return FeedbackFilterState(
+            self.mode, common.active, common.reason, common.expression, common.updates,
+            live_goals=self.plan.live_goals if self.plan else 0, feedback_taken=feedback_taken,
+            feedback_dropped=feedback_dropped,
+            filtered_in=self.filtered_in(feedback_taken, writers), **proof)
 
     def filtered_in(self, feedback_taken: int, writers: Callable[[], Iterable[Any]]) -> str:
         """Where other goals' feedback is dropped; see :class:`cft_action.FeedbackFilterState`.

@@ -159,6 +159,31 @@ class HeldGoals:
                 return bool(came)
             time.sleep(self._poll_period)
 
+    def proof_state(self, filtered: bool) -> dict[str, Any]:
+        """The proof's fields of ``FeedbackFilterState``; ``filtered``: whether a filter
+        plan is in force (without one, nothing needs a proof)."""
+        return {'confirmed': not filtered or self._gate.is_confirmed(self.needed()),
+                'held_goals': self.count, 'arrival_timeouts': self._gate.timeouts,
+                'holds_suspended': self.suspended}
+
+    def await_server_proof(self, writer_is_remote: Callable[[], bool],
+                           timeout_sec: Optional[float], started: float) -> None:
+        """``wait_for_server``'s wait for the proof that the server has the feedback reader.
+
+        Waits at most ``timeout`` seconds, and within ``timeout_sec`` from ``started`` (a
+        monotonic time), unless the proof came, holding is suspended, or the feedback writer is in
+        this process. Call it without ``lock``.
+        """
+        with self._lock:
+            if self._gate.is_confirmed(0) or self.suspended or not writer_is_remote():
+                return
+        left = self._timeout
+        if timeout_sec is not None and timeout_sec >= 0:
+            left = min(left, max(0.0, timeout_sec - (time.monotonic() - started)))
+        if not self.await_proof(time.monotonic() + left):
+            self._logger.debug('wait_for_server: the server did not prove that it has the '
+                               'feedback reader in time; the first goal will be held')
+
     def poll_proof(self) -> Optional[bool]:
         """Poll the running proof: True once it came, False once it timed out, else None.
 

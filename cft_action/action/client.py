@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import os
 import time
-from typing import Any, Callable, NamedTuple, Optional
+from typing import Any, Callable, Optional
 
 from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -30,7 +30,7 @@ from unique_identifier_msgs.msg import UUID
 
 from cft_action import _rcl
 from cft_action.action._action_entities import ActionEntities
-from cft_action.action._feedback_filter import FeedbackFilter
+from cft_action.action._feedback_filter import FeedbackFilter, FeedbackFilterState
 from cft_action.action._feedback_intake import FeedbackIntake, MORE_FEEDBACK
 from cft_action.topics._filtered_reader import (filter_class_for, WRITER_FILTERING,
                                                 WRITER_FILTERING_ENV)
@@ -86,51 +86,6 @@ ARRIVAL_POLL_PERIOD = 0.01
 BACKGROUND_PROOF_POLL_PERIOD = 0.5
 
 
-class FeedbackFilterState(NamedTuple):
-    """A snapshot of an :class:`ActionClient`'s feedback filter.
-
-    :ivar mode: ``'client'``, ``'goals'`` or ``'off'``.
-    :ivar active: whether the middleware filters the feedback subscription.
-    :ivar reason: why the filter is not active; empty when it is.
-    :ivar expression: the filter expression in force; empty when not active.
-    :ivar updates: filter changes sent after the first installation; each is an event at the
-        server's writer.
-    :ivar live_goals: goals that hold an exact term in the expression.
-    :ivar feedback_taken: feedback messages taken from rcl by this client.
-    :ivar feedback_dropped: of those, messages not given to a callback: there was none for their
-        goal, or the server published them after the goal's result.
-    :ivar confirmed: whether the server's feedback writer is known to apply every term that a goal
-        sent so far needs. A goal whose term came with an update is held until it is.
-    :ivar held_goals: goal requests that were held for that proof, since construction.
-    :ivar arrival_timeouts: times the proof did not come within ``FILTER_ARRIVAL_TIMEOUT`` and the
-        held goals were sent without it.
-    :ivar holds_suspended: whether, since such a timeout, goals are sent at once, without a
-        proof, as rclpy sends them: a client waits for a proof that does not come only once, and
-        holds goals again once a proof, which goes on in the background, has come.
-    :ivar filtered_in: where other goals' feedback is dropped: ``'writer'`` (the server's writer
-        does not send it: a guarded server, or ``writer_filtering='any'``), ``'reader'`` (it
-        crosses the network and this client's DDS reader drops it before Python: an unguarded
-        server), ``'none'`` (not filtered: rclpy drops it in Python), or ``'unknown'`` (no
-        feedback has arrived yet, or this process discovered the server before its first use of
-        cft_action, which then cannot read the server's discovery data, where a guarded server
-        says that it filters).
-    """
-
-    mode: str
-    active: bool
-    reason: str
-    expression: str
-    updates: int
-    live_goals: int
-    feedback_taken: int
-    feedback_dropped: int
-    confirmed: bool = True
-    held_goals: int = 0
-    arrival_timeouts: int = 0
-    filtered_in: str = 'unknown'
-    holds_suspended: bool = False
-
-
 def _deep_service_queues(kwargs: dict[str, Any]) -> dict[str, Any]:
     """``kwargs`` with a profile of ``SERVICE_QUEUE_DEPTH`` for each service not given one."""
     deep = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=SERVICE_QUEUE_DEPTH,
@@ -161,8 +116,7 @@ class ActionClient(CompatActionClient):
     def __init__(self, node: Node, action_type: Any, action_name: str, *,
                  feedback_filter: Optional[str] = None,
                  enable_feedback_msg_optimization: Optional[bool] = None,
-                 writer_filtering: str = 'guarded',
-                 **kwargs: Any) -> None:
+                 writer_filtering: str = 'guarded', **kwargs: Any) -> None:
         """
         Create an ActionClient.
 
@@ -172,29 +126,19 @@ class ActionClient(CompatActionClient):
         :param action_type: Type of the action.
         :param action_name: Name of the action.
             Used as part of the underlying topic and service names.
-        :param feedback_filter: How the feedback subscription is filtered:
-
-            - ``'client'`` (default): on a random tag that starts the UUID of every goal this client
-              sends with a feedback callback. The filter never changes after construction.
-            - ``'goals'``: on the exact UUIDs of the live goals that have a feedback callback. The
-              filter changes as goals come and go, which costs filter updates at the server.
-            - ``'off'``: no filter, as plain rclpy.
-
-            The environment variable ``CFT_ACTION_FEEDBACK_FILTER`` overrides it. Where the filter
-            cannot be used, the client falls back to plain behaviour, logs why once, and reports
-            it in :attr:`feedback_filter_state`.
-        :param enable_feedback_msg_optimization: The name of the newer distros' opt-in feedback
-            filter (rclpy 10, Lyrical), accepted so that code moves between distros: ``True``
-            means ``feedback_filter='client'`` unless another filtering mode is given, ``False``
-            means ``'off'``. Unlike there, filtering is on when neither is given.
-        :param writer_filtering: Which servers may filter on their side. ``'guarded'`` (default):
-            the filter uses the library's own filter class, which only a server run under
-            ``cft-action guard`` knows; any other server sends this client all feedback, as to a
-            plain client, and this client's DDS reader drops other goals' feedback before Python.
-            ``'any'``: a DDS-SQL filter that every Fast DDS server evaluates, which costs an
-            unguarded server time per sample and filtered client, and exposes it to
-            Fast-DDS#4878 (docs/SAFETY.md). The environment variable
-            ``CFT_ACTION_WRITER_FILTERING`` overrides it.
+        :param feedback_filter: ``'client'`` (default): on a random tag that starts the UUID of
+            every goal sent with a feedback callback, fixed for the client's life; ``'goals'``: on
+            the live goals' exact UUIDs, updated as goals come and go (an event at the server
+            each); ``'off'``: as plain rclpy. ``CFT_ACTION_FEEDBACK_FILTER`` overrides it. Where
+            the filter cannot be used, the client behaves as rclpy, logs why once, and says so in
+            :attr:`feedback_filter_state`.
+        :param enable_feedback_msg_optimization: rclpy 10's (Lyrical) name for its opt-in filter:
+            ``True`` means ``'client'`` unless another mode is given, ``False`` means ``'off'``.
+        :param writer_filtering: ``'guarded'`` (default): the library's own filter class, which
+            only a server under ``cft-action guard`` evaluates (any other sends everything, and
+            this client's DDS reader drops others' feedback before Python); ``'any'``: DDS-SQL,
+            which every Fast DDS server evaluates, at a cost and exposed to Fast-DDS#4878
+            (docs/SAFETY.md). ``CFT_ACTION_WRITER_FILTERING`` overrides it.
         :param kwargs: ``callback_group``, ``feedback_sub_qos_profile``, ``status_sub_qos_profile``
             as for rclpy; ``goal_``, ``result_`` and ``cancel_service_qos_profile`` too, which
             default to a depth of ``SERVICE_QUEUE_DEPTH`` (rclpy's: 10).
@@ -222,9 +166,8 @@ class ActionClient(CompatActionClient):
             self._assemble()
 
     def _cft_before_first_wait(self) -> None:
-        # rmw_fastrtps recreates the DataReader when a first filter is set, which must not happen
-        # while an executor waits on it, nor after a goal was sent, or queued feedback would be
-        # lost: so the filter goes in here, after rclpy created the rcl action client.
+        # The first filter recreates the DataReader (rmw_fastrtps), which must not happen under a
+        # waiting executor or after a goal was sent: so it goes in here, before the first wait.
         self._assemble()
         self._status.filter_reader()
         self._filter.install(self._cft_client_handle, self._entities.feedback_subscription,
@@ -232,9 +175,8 @@ class ActionClient(CompatActionClient):
                              self._entities.feedback_reason,
                              is_content_filter_supported(self._cft_node))
         if self._filter.plan is not None:
-            # The proof that the server has the recreated reader begins now: its probe's client is
-            # announced right after the reader, so the server discovers both at once, not a
-            # discovery round later when wait_for_server or the first goal asks for the proof.
+            # The proof that the server has the recreated reader begins now, so that the server
+            # discovers its probe with the reader, not a discovery round later.
             with self._reader.lock:
                 self._arrival.begin(0)
 
@@ -272,17 +214,9 @@ class ActionClient(CompatActionClient):
     def feedback_filter_state(self) -> FeedbackFilterState:
         """The feedback filter's mode, whether it is active and why not, and its counters."""
         with self._reader.lock:
-            common = self._reader.state
-            plan = self._filter.plan
-            return FeedbackFilterState(
-                self._filter.mode, common.active, common.reason, common.expression, common.updates,
-                live_goals=plan.live_goals if plan else 0,
-                feedback_taken=self._intake.taken, feedback_dropped=self._intake.dropped,
-                confirmed=plan is None or self._arrival.is_confirmed(self._held_goals.needed()),
-                held_goals=self._held_goals.count, arrival_timeouts=self._arrival.timeouts,
-                filtered_in=self._filter.filtered_in(self._intake.taken,
-                                                     self._feedback_writers.gids),
-                holds_suspended=self._held_goals.suspended)
+            return self._filter.state(
+                self._intake.taken, self._intake.dropped, self._feedback_writers.gids,
+                **self._held_goals.proof_state(self._filter.plan is not None))
 
     @property
     def goal_status_state(self) -> GoalStatusState:
@@ -315,13 +249,11 @@ class ActionClient(CompatActionClient):
         The result of the returned Future is set to a ClientGoalHandle when receipt of the goal
         is acknowledged by an action server.
 
-        When the filter must grow to match this goal, it grows before the request is sent, and
-        the request is held until the server's cancel service, asked from a client created after
-        the growth, has replied: discovery is ordered, so the feedback writer then has the new
-        filter, and the feedback that the server publishes at once is not filtered out. The first
-        goal with a feedback callback is held the same way until the server is proven to have this
-        client's feedback reader at all, unless :meth:`wait_for_server` proved it. Requests are
-        sent in the order of the calls.
+        A request whose goal the filter does not match yet is held until the server has the
+        grown filter, proven by a reply of its cancel service to a probe created after the growth
+        (discovery is ordered), so that feedback published at once is not filtered out; so is the
+        first goal with a feedback callback, until the server has this client's feedback reader.
+        Requests are sent in the order of the calls.
 
         :param goal: The goal request.
         :type goal: action_type.Goal
@@ -358,11 +290,9 @@ class ActionClient(CompatActionClient):
         """
         Wait for an action server to be ready.
 
-        Returns as soon as an action server is ready for this client: as rclpy, once the server's
-        services are available; with a feedback filter, also once the server's feedback writer is
-        proven to have this client's feedback reader (a reply of its cancel service, as for a held
-        goal), waiting for that at most ``FILTER_ARRIVAL_TIMEOUT`` seconds and within
-        ``timeout_sec``. A goal sent before that proof would be held until it.
+        As rclpy, once the server's services are available; with a feedback filter, also once
+        its feedback writer is proven to have this client's reader (as for a held goal), waiting
+        for that at most ``FILTER_ARRIVAL_TIMEOUT`` seconds, within ``timeout_sec``.
 
         :param timeout_sec: Number of seconds to wait until an action server is available.
             If None, then wait indefinitely.
@@ -371,16 +301,8 @@ class ActionClient(CompatActionClient):
         started = time.monotonic()
         if not super().wait_for_server(timeout_sec=timeout_sec):
             return False
-        with self._reader.lock:
-            unproven = (self._filter.plan is not None and not self._arrival.is_confirmed(0)
-                        and not self._held_goals.suspended and self._feedback_writers.any())
-        if unproven:
-            left = FILTER_ARRIVAL_TIMEOUT
-            if timeout_sec is not None and timeout_sec >= 0:
-                left = min(left, max(0.0, timeout_sec - (time.monotonic() - started)))
-            if not self._held_goals.await_proof(time.monotonic() + left):
-                self._cft_logger.debug('wait_for_server: the server did not prove that it has '
-                                       'the feedback reader in time; the first goal will be held')
+        if self._filter.plan is not None:
+            self._held_goals.await_server_proof(self._feedback_writers.any, timeout_sec, started)
         return True
 
     def destroy(self) -> None:
@@ -394,9 +316,8 @@ class ActionClient(CompatActionClient):
     # --- rclpy's waitable, with late feedback and finished goals ----------------------------------
 
     def _cft_result_request_done(self, future: Future) -> None:
-        # rclpy drops a goal's feedback callback as soon as its result arrives, and so loses the
-        # goal's feedback still queued behind the result (measured: 559 of 600 with 200 goals).
-        # Here the goal counts as finished and is released after the grace period instead.
+        # rclpy drops a goal's feedback callback when its result arrives, losing feedback queued
+        # behind it (559 of 600 with 200 goals): here it is released after the grace period.
         goal_id = self._cft_forget_result_request(future)
         if goal_id is not None:
             self._finished_goals.finished([bytes(goal_id.uuid)])
@@ -418,13 +339,12 @@ class ActionClient(CompatActionClient):
         if entities is not None:
             self._cft_clear_readiness()  # rclpy's takes drop the sample info: taken below, with it
         data = super()._cft_take_data()
+        taken_here = 'result' not in data and result_ready and entities is not None
+        stamp = entities.take_result_into(data) if taken_here and entities else 0
         if 'result' in data:
-            self._note_result(data['result'][0], 0)
-        elif result_ready and entities is not None:
-            sequence_number, response, stamp = entities.take_result()
-            if response is not None and sequence_number is not None:
-                data['result'] = (sequence_number, response)
-                self._note_result(sequence_number, stamp)
+            goal_id = self._cft_goal_id_of_result_request(data['result'][0])
+            if goal_id is not None:
+                self._finished_goals.result(bytes(goal_id.uuid), stamp)
         self._intake.take_into(data, feedback_ready and entities is not None)
         self._status.take_into(data, status_ready)
         return data
@@ -433,17 +353,10 @@ class ActionClient(CompatActionClient):
         """Execute work after data has been taken from a ready wait set.
 
         As rclpy's, with every feedback message taken in this wake; it also notes goals that
-        finished (rejected, or a terminal status), whose callbacks and filter terms are then
-        released even if nobody asks for their results.
-        """
+        finished (rejected, or a terminal status), to release their callbacks and filter terms."""
         goal_id = self._cft_goal_id_of_goal_request(taken_data.get('goal', (None,))[0])
         more = self._intake.more(taken_data)
         await super().execute(taken_data)
         for feedback in more:
             await super().execute({'feedback': feedback})
         self._finished_goals.finished(self._status.executed(taken_data, goal_id))
-
-    def _note_result(self, sequence_number: int, stamp: int) -> None:
-        goal_id = self._cft_goal_id_of_result_request(sequence_number)
-        if goal_id is not None:
-            self._finished_goals.result(bytes(goal_id.uuid), stamp)
