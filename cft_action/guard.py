@@ -16,6 +16,11 @@ changes that writer's filters. The server's code does not change::
 
 or, from Python, ``subprocess.Popen(cmd, env=cft_action.guard.environment())``.
 
+Where it knows the Fast DDS, it also sends each of an action's goal, cancel and result replies only
+to the response readers of the participant that sent the request (the others' take would discard
+it): see :func:`reply_counts`; ``CFT_GUARD_REPLIES=off`` sends every reply to every client, as
+rmw_fastrtps does.
+
 It only locks on a Fast DDS it knows (``libfastrtps.so.2.14``, ``libfastdds.so.3.2``). On any other
 version it calls straight through and prints one line on stderr saying that it is inactive and why.
 Set ``CFT_GUARD_DEBUG=1`` to see what it does.
@@ -32,7 +37,8 @@ from cft_action._native import extension_path, GUARD_LIBRARY
 from cft_action.errors import CftActionError
 
 __all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts',
-           'filter_counts', 'layout', 'writer_limits', 'environment', 'READER_FILTERS_ENV']
+           'filter_counts', 'layout', 'writer_limits', 'reply_counts', 'environment',
+           'READER_FILTERS_ENV', 'REPLIES_ENV']
 
 #: Environment variable with the number of filtered readers that each writer of a guarded process
 #: filters for (1 to 4063; default 1024; Fast DDS's own limit is 32).
@@ -239,6 +245,35 @@ def heartbeat_counts() -> dict[str, int]:
     An empty dict when the guard is not preloaded.
     """
     return _counters('cft_guard_heartbeat_count', HEARTBEAT_COUNTERS)
+
+
+#: The counters of cft_guard_reply_count() in _guard_replies.c, in its order.
+REPLY_COUNTERS = ('marked', 'withheld', 'passed', 'implausible', 'full')
+
+#: Environment variable that turns the reply filter off (``off`` or ``0``).
+REPLIES_ENV = 'CFT_GUARD_REPLIES'
+
+
+def reply_counts() -> dict[str, int]:
+    """Return what the guard did with this process's action replies.
+
+    rmw_fastrtps writes every goal, cancel and result reply to every client's response reader, and
+    each client's take discards the others' replies. The guard sends a reply only to the readers of
+    the participant whose request it answers (named by the reply's related sample identity); the
+    others get a GAP for it (cft_action/native/guard/_guard_replies.c). ``CFT_GUARD_REPLIES=off``
+    turns that off. Keys:
+
+    - ``marked``: reply writers (``rr/.../_action/{send_goal,cancel_goal,get_result}Reply``) whose
+      replies go to the requesting participant only;
+    - ``withheld``: verdicts that kept a reply from a reader of another participant;
+    - ``passed``: verdicts for readers of the requesting participant (the reply goes to them);
+    - ``implausible``: replies whose related identity did not read as rmw_fastrtps writes it (sent
+      to every reader, as without the guard; 0, or the layout is not the one expected);
+    - ``full``: reply writers left unmarked because the guard's table was full.
+
+    An empty dict when the guard is not preloaded.
+    """
+    return _counters('cft_guard_reply_count', REPLY_COUNTERS)
 
 
 def environment(env: Optional[Mapping[str, str]] = None) -> dict[str, str]:

@@ -71,6 +71,15 @@ void cft_fastdds_layout() {
          offsetof(CacheChange_t, write_params) + offsetof(WriteParams, sample_identity_) +
              offsetof(SampleIdentity, writer_guid_),
          "CacheChange_t::write_params.sample_identity().writer_guid() (GUID_t)");
+  LAYOUT(CC_WRITER_GUID, offsetof(CacheChange_t, writerGUID), "CacheChange_t::writerGUID (GUID_t)");
+  LAYOUT(CC_RELATED_WRITER_GUID,
+         offsetof(CacheChange_t, write_params) + offsetof(WriteParams, related_sample_identity_) +
+             offsetof(SampleIdentity, writer_guid_),
+         "CacheChange_t::write_params.related_sample_identity().writer_guid() (GUID_t)");
+  LAYOUT(CC_RELATED_SEQUENCE,
+         offsetof(CacheChange_t, write_params) + offsetof(WriteParams, related_sample_identity_) +
+             offsetof(SampleIdentity, sequence_number_),
+         "CacheChange_t::write_params.related_sample_identity().sequence_number()");
   LAYOUT(RR_HISTORY, offsetof(RTPSReader, mp_history), "RTPSReader::mp_history");
   LAYOUT(RR_DATA_FILTER, offsetof(RTPSReader, data_filter_), "RTPSReader::data_filter_");
   LAYOUT(RH_READER, offsetof(ReaderHistory, mp_reader), "ReaderHistory::mp_reader");

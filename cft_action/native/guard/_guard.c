@@ -42,6 +42,7 @@
 #include "_filter_class.h"
 #include "_guard_filter.h"
 #include "_guard_log.h"
+#include "_guard_replies.h"
 
 // ---- public state codes (mirrored in cft_action/guard.py) ---------------------------------------
 #define CFT_GUARD_ARMED 0        // preloaded; no Fast DDS resolved yet (none loaded, or not used)
@@ -58,7 +59,8 @@
 // virtual too: the slots of DataWriterImpl's vtable and of its statistics subclass's are
 // R_X86_64_64 relocations against its exported name, no thunk), answers for the readers of those
 // classes that _guard_filter.c keeps out of Fast DDS's filter collection, so that no filter
-// signature is written for them. Only Fast DDS 2.14 has the last three here.
+// signature is written for them, and for the readers that an action's reply is not for
+// (_guard_replies.c). Only Fast DDS 2.14 has the last three here.
 enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND = 4, FN_REL = 5,
        FN_COUNT = 6 };
 
@@ -389,6 +391,7 @@ static void close_claim(bool *open) {
     real(self, guid, info);                                                                     \
     if (FILTERS && scoped_lock_ != NULL) cft_filter_reader_changed(self, guid, info);           \
     else if (FILTERS) cft_filter_reader_dropped(self, guid);                                    \
+    if (FILTERS) cft_replies_reader_matched(self, guid, info);                                  \
   }                                                                                             \
   void cft_rrf##SUFFIX(void *self, const void *guid) {                                          \
     struct family *f = ready(FAM);                                                              \
@@ -433,6 +436,7 @@ bool cft_is_relevant2(const void *self, const void *change, const void *reader_g
   if (f->state == CFT_GUARD_ACTIVE) {
     int verdict = cft_filter_relevance(self, change, reader_guid);
     if (verdict >= 0) return verdict == 1;
+    if (cft_replies_relevance(change, reader_guid) == 0) return false;
   }
   relevant_fn real = (relevant_fn)f->real[FN_REL];
   if (real == NULL) {

@@ -3,11 +3,13 @@
 // What _guard.c (the locks, and the interposition of the DataWriterImpl members) offers the other
 // parts of the server guard. The guard is _guard.c, _guard_filter.c (the DDS-SQL accelerator,
 // _guard_filter.h), _guard_writer_qos.c (the writers' limit of filtered readers),
-// _guard_heartbeats.c (which readers a filtered writer's HEARTBEATs and GAPs reach), _guard_log.c
-// (logging, _guard_log.h) and the filter classes (_filter_class.c, _uuid_program.c,
+// _guard_heartbeats.c (which readers a filtered writer's HEARTBEATs and GAPs reach),
+// _guard_replies.c (an action's replies go to the requesting participant, _guard_replies.h),
+// _guard_log.c (logging, _guard_log.h) and the filter classes (_filter_class.c, _uuid_program.c,
 // _node_program.c); setup.py builds them into one library. Calls go one way: _guard_writer_qos.c
-// and _guard_heartbeats.c -> _guard.c -> _guard_filter.c and _filter_class.c, and every part ->
-// _guard_log.c.
+// and _guard_heartbeats.c -> _guard.c -> _guard_replies.c -> _guard_filter.c and _filter_class.c,
+// and every part -> _guard_log.c (_guard_replies.c also uses _guard.c's cft_guard_real and
+// cft_guard_knows_fastdds2, as _guard_heartbeats.c does).
 #ifndef CFT_ACTION_GUARD_H_
 #define CFT_ACTION_GUARD_H_
 

@@ -224,8 +224,8 @@ struct reader_filter {
 
 // Reads the reader's filter into *f. False when the data fails a check (the layout is then
 // suspect, and every verdict goes back to Fast DDS) or the reader has no filter (*filtered false).
-static bool read_reader_filter(const uint8_t *info, const uint8_t *guid, struct reader_filter *f,
-                               bool *filtered) {
+// True when the reader's data holds its GUID where the checked layout has it (m_guid and m_key).
+static bool holds_its_guid(const uint8_t *info, const uint8_t *guid) {
   if (!located(info, guid)) {
     layout_suspect("the reader's GUID is not in m_guid and m_key, as a whole or moved");
     return false;
@@ -234,6 +234,12 @@ static bool read_reader_filter(const uint8_t *info, const uint8_t *guid, struct 
     layout_suspect("a reader's GUID is not where the first reader's was");
     return false;
   }
+  return true;
+}
+
+static bool read_reader_filter(const uint8_t *info, const uint8_t *guid, struct reader_filter *f,
+                               bool *filtered) {
+  if (!holds_its_guid(info, guid)) return false;
   const uint8_t *cfp = info + RPD_CONTENT_FILTER + shift;
   const char *topic = string255(info + RPD_TOPIC_NAME + shift);
   f->type = string255(info + RPD_TYPE_NAME + shift);
@@ -309,6 +315,21 @@ static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool
   return NULL;
 }
 #endif
+
+const char *cft_filter_reader_topic(const void *reader_info, const void *reader_guid) {
+  if (reader_info == NULL || reader_guid == NULL || __atomic_load_n(&layout_failed, __ATOMIC_RELAXED))
+    return NULL;
+#if CFT_LAYOUT_KNOWN
+  const uint8_t *info = reader_info;
+  if (!holds_its_guid(info, reader_guid)) return NULL;
+  const char *topic = string255(info + RPD_TOPIC_NAME + shift);
+  if (topic == NULL) layout_suspect("a topic name");
+  return topic;
+#else
+  layout_suspect(CFT_LAYOUT_SOURCE);
+  return NULL;
+#endif
+}
 
 // ---- the table: (writer, reader GUID) -> program ---------------------------------------------------
 // Open addressing with a bounded probe. A missing entry is always safe (Fast DDS decides), so a

@@ -35,6 +35,11 @@ bool cft_filter_claim_begin(const void *writer, const void *reader_guid, const v
 bool cft_filter_claimed(const char *class_name);
 void cft_filter_claim_end(void);
 
+// The topic name in a matched reader's discovery data (Fast DDS 2.14's ReaderProxyData), read
+// through the layout that the verdicts use and checked as they check it (a failed check turns the
+// verdicts off, as theirs does); NULL when it cannot be read.
+const char *cft_filter_reader_topic(const void *reader_info, const void *reader_guid);
+
 // DataWriterImpl::is_relevant for a reader the guard keeps: 1 or 0; -1 when Fast DDS answers.
 int cft_filter_relevance(const void *writer, const void *change, const void *reader_guid);
 // The verdict for one sample and one reader: the uuid program's when there is one for the
