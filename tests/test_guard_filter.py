@@ -137,7 +137,7 @@ int main() {
     if (word == 3 && at >= 4) length_at = at;
   }
   CacheChange_t change;  // public members: the offsets measured on an object
-  printf("%ld %ld %zu %zu %zu %zu %ld %zu %ld %zu %zu %ld %ld %ld %ld %zu %ld %zu\n",
+  printf("%ld %ld %zu %zu %zu %zu %ld %zu %ld %zu %zu %ld %ld %ld %ld %zu %ld %zu %ld %ld %ld\n",
          diff(&rpd->typeName(), rpd), diff(&rpd->content_filter(), rpd),
          offsetof(ContentFilterProperty, related_topic_name),
          offsetof(ContentFilterProperty, filter_class_name),
@@ -146,7 +146,9 @@ int main() {
          length_at, offsetof(SerializedPayload_t, length), offsetof(SerializedPayload_t, data),
          diff(&rpd->guid(), rpd), diff(&rpd->key(), rpd), diff(&rpd->topicName(), rpd),
          diff(&change.kind, &change), sizeof change.kind, diff(&change.serializedPayload, &change),
-         offsetof(SerializedPayload_t, max_size));
+         offsetof(SerializedPayload_t, max_size), diff(&change.writerGUID, &change),
+         diff(&change.write_params.related_sample_identity().writer_guid(), &change),
+         diff(&change.write_params.related_sample_identity().sequence_number(), &change));
   return 0;
 }
 '''
@@ -156,7 +158,8 @@ int main() {
 LAYOUT_NAMES = ('RPD_TYPE_NAME', 'RPD_CONTENT_FILTER', 'CFP_RELATED_TOPIC', 'CFP_CLASS_NAME',
                 'CFP_EXPRESSION', 'CFP_PARAMETERS', 'RLV_VECTOR', 'STRING255_SIZE',
                 'STRING255_LENGTH', 'PAYLOAD_LENGTH', 'PAYLOAD_DATA', 'RPD_GUID', 'RPD_KEY',
-                'RPD_TOPIC_NAME', 'CC_KIND', 'CC_KIND_SIZE', 'CC_PAYLOAD', 'PAYLOAD_MAX_SIZE')
+                'RPD_TOPIC_NAME', 'CC_KIND', 'CC_KIND_SIZE', 'CC_PAYLOAD', 'PAYLOAD_MAX_SIZE',
+                'CC_WRITER_GUID', 'CC_RELATED_WRITER_GUID', 'CC_RELATED_SEQUENCE')
 
 
 def guard_library() -> ctypes.CDLL:
