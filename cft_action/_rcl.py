@@ -236,6 +236,9 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'cft_writer_marks_install': (_reader_lock, ctypes.c_int, [], None),
     'cft_writer_marks_error': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_writer_is_marked': (_reader_lock, ctypes.c_int, [ctypes.c_char_p], None),
+    'cft_reader_filter_class':
+        (_reader_lock, ctypes.c_int, [ctypes.c_char_p, ctypes.c_char_p, ctypes.c_size_t], None),
+    'cft_reader_filters_error': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_status_table_new': (_reader_lock, _void_p, [], None),
     'cft_status_table_free': (_reader_lock, None, [_void_p], None),
     'cft_status_table_sending': (_reader_lock, ctypes.c_int, [_void_p, ctypes.c_char_p], None),
@@ -414,6 +417,25 @@ def writer_filters(gid: bytes) -> Optional[bool]:
     if _lib.cft_writer_is_marked(bytes(gid)[:16]):
         return True
     return False if _WRITER_MARKS_COMPLETE else None
+
+
+def reader_filter_class(gid: bytes) -> Optional[str]:
+    """The content filter class of the reader with this GID, from its discovery data
+    (cft_action/native/reader/_writer_marks.c): ``'DDSSQL'``, one of the library's classes, ``''``
+    for a reader without a filter, or None when this process did not read its data
+    (:func:`reader_filters_reason`)."""
+    name = ctypes.create_string_buffer(64)
+    if _lib.cft_reader_filter_class(bytes(gid)[:16], name, len(name)):
+        return name.value.decode('utf-8', 'replace')
+    return None
+
+
+def reader_filters_reason() -> str:
+    """Why this process may not know a discovered reader's filter class; ``''`` when it knows
+    every reader's."""
+    reason = WRITER_MARKS_REASON or (_lib.cft_reader_filters_error() or b'').decode(
+        'utf-8', 'replace')
+    return reason
 
 
 _reader_lock_tried = False

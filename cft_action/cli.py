@@ -5,6 +5,7 @@
     cft-action guard --print-path                     # the library to put in LD_PRELOAD yourself
     cft-action topic echo /weather --content-filter "temperature > %0" --content-filter-params 30.0
     cft-action topic hz /chatter std_msgs/msg/String --filter "m.data.startswith('hello')"
+    cft-action action info /fibonacci                 # which servers run the guard, and more
 
 Each verb is a module of :mod:`cft_action.verb` with its help texts, ``add_arguments`` and
 ``main``; this module only builds the parsers from them and dispatches.
@@ -18,7 +19,7 @@ import sys
 from types import ModuleType
 from typing import Optional, Sequence
 
-from cft_action.verb import TOPIC_VERBS
+from cft_action.verb import ACTION_VERBS, TOPIC_VERBS
 
 _PROG = 'cft-action'
 
@@ -39,6 +40,19 @@ examples:
 
   Call `{_PROG} topic <command> -h` for more detailed usage."""
 
+_ACTION_HELP = 'Various action related sub-commands, with where feedback is filtered'
+
+_ACTION_DESCRIPTION = """\
+Various action related sub-commands, as ros2 action's, which also tell from the discovery data
+which servers run the cft_action server guard and where each client's feedback is filtered."""
+
+_ACTION_EPILOG = f"""\
+examples:
+  {_PROG} action list -t
+  {_PROG} action info /fibonacci --json
+
+  Call `{_PROG} action <command> -h` for more detailed usage."""
+
 
 def _verb(name: str) -> ModuleType:
     return importlib.import_module(f'cft_action.verb.{name}')
@@ -53,6 +67,18 @@ def _add_verb_parser(subparsers, name: str, module: ModuleType) -> argparse.Argu
     return parser
 
 
+def _add_command(commands, name: str, help_text: str, description: str, epilog: str,
+                 verbs: dict[str, str]) -> None:
+    """A command of verbs (``topic``, ``action``): ``verbs`` maps each verb to its module."""
+    command = commands.add_parser(
+        name, help=help_text, description=description, epilog=epilog,
+        formatter_class=argparse.RawDescriptionHelpFormatter)
+    command.set_defaults(_verb_module=None, _verb_parser=command)
+    subparsers = command.add_subparsers(title='Commands', dest='_verb', metavar='<command>')
+    for verb, module in verbs.items():
+        _add_verb_parser(subparsers, verb, _verb(module))
+
+
 def _build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog=_PROG,
@@ -61,14 +87,11 @@ def _build_parser() -> argparse.ArgumentParser:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog=f'  Call `{_PROG} <command> -h` for more detailed usage.')
     commands = parser.add_subparsers(title='Commands', dest='_command', metavar='<command>')
+    _add_command(commands, 'action', _ACTION_HELP, _ACTION_DESCRIPTION, _ACTION_EPILOG,
+                 ACTION_VERBS)
     _add_verb_parser(commands, 'guard', _verb('guard'))
-    topic = commands.add_parser(
-        'topic', help=_TOPIC_HELP, description=_TOPIC_DESCRIPTION, epilog=_TOPIC_EPILOG,
-        formatter_class=argparse.RawDescriptionHelpFormatter)
-    topic.set_defaults(_verb_module=None, _verb_parser=topic)
-    verbs = topic.add_subparsers(title='Commands', dest='_verb', metavar='<command>')
-    for name in TOPIC_VERBS:
-        _add_verb_parser(verbs, name, _verb(name))
+    _add_command(commands, 'topic', _TOPIC_HELP, _TOPIC_DESCRIPTION, _TOPIC_EPILOG,
+                 {name: name for name in TOPIC_VERBS})
     return parser
 
 
@@ -79,7 +102,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     if not args._command:
         parser.print_help()
         return 0
-    if args._verb_module is None:  # `cft-action topic` without a verb
+    if args._verb_module is None:  # `cft-action topic` or `action` without a verb
         args._verb_parser.print_help()
         return 0
     return args._verb_module.main(args, args._verb_parser, args._verb_parser.prog)

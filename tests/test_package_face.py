@@ -58,7 +58,8 @@ def test_every_public_name_resolves():
 
 @pytest.mark.parametrize('argv', [
     ['--help'], ['topic', '--help'], ['topic', 'echo', '--help'], ['topic', 'hz', '--help'],
-    ['topic', 'bw', '--help'], ['guard', '--help'],
+    ['topic', 'bw', '--help'], ['guard', '--help'], ['action', '--help'],
+    ['action', 'list', '--help'], ['action', 'info', '--help'],
 ])
 def test_cli_help_imports_no_rclpy(argv):
     """Runs the installed ``cft-action`` console script itself."""

@@ -2,9 +2,9 @@
 """What ``cft-action action list`` and ``action info`` read from the ROS graph, as
 ros2cli's ``ros2action.api``, plus where each action's feedback is filtered.
 
-The servers and clients of an action are found as ``ros2 action info`` finds them (per node,
-``rclpy.action.graph``), and named as ros2cli names nodes (``/ns/name``). Beyond that, from the
-discovery data this process reads (cft_action/native/reader/_writer_marks.c):
+The servers and clients of an action are those ``ros2 action info`` finds (the publishers and
+subscribers of its feedback topic), named as ros2cli names nodes (``/ns/name``). Beyond that,
+from the discovery data this process reads (cft_action/native/reader/_writer_marks.c):
 
 - per server node, whether its process runs the guard: the guard marks every writer of its
   process (cft_action/native/guard/_guard_writer_qos.c), so the node's feedback writers say it;
@@ -25,9 +25,10 @@ import time
 from typing import Any, Callable, NamedTuple, Optional
 
 #: Seconds to spin for discovery. ros2cli's direct node (``ros2cli.node.direct``) spins 0.5 s, and
-#: ``ros2 action`` normally asks the daemon, which has long discovered the graph; these verbs have
-#: no daemon, and the last endpoints of six processes on a loaded machine came after 1.2 s.
-DEFAULT_SPIN_TIME = 2.0
+#: ``ros2 action`` normally asks the daemon, which has long discovered the graph. These verbs have
+#: no daemon, and a new participant may learn of the others only from their periodic announcements
+#: (Fast DDS's default period is 3 s): the first other node came after 0.02-3.3 s in 20 runs here.
+DEFAULT_SPIN_TIME = 4.0
 
 #: ``FeedbackFilterState.filtered_in``'s words, and this module's for a node seen without it.
 FILTERED_IN = ('writer', 'reader', 'none', 'unknown')
@@ -112,36 +113,38 @@ def get_action_clients_and_servers(
         node: Any, action_name: str) -> tuple[list[ClientInfo], list[ServerInfo]]:
     """The client and server nodes of the fully qualified ``action_name``, sorted by name.
 
-    Unlike ros2cli's, a node name that several nodes have is listed once (ros2cli lists it once
-    per node, each time with the actions of them all).
+    As rcl_action's graph queries (``rcl_action_get_client_names_and_types_by_node``), which
+    ``ros2 action info`` asks per node, a client is a node that subscribes to the action's
+    feedback topic and a server one that publishes it, its type the topic's without
+    ``_FeedbackMessage``. They are asked here per topic, whose endpoints name their nodes: the
+    queries by node answer for the first node of a name, so ros2cli lists two servers of one name
+    (on two actions) as two servers of each.
     """
-    from rclpy.action.graph import (get_action_client_names_and_types_by_node,
-                                    get_action_server_names_and_types_by_node)
-
     feedback = f'{action_name}/_action/feedback'
     readers = _endpoints_by_node(node.get_subscriptions_info_by_topic(feedback))
     writers = _endpoints_by_node(node.get_publishers_info_by_topic(feedback))
-    clients, servers = [], []
-    # Nodes of the same name are one entry: the graph's queries by node cannot tell them apart.
-    for name, namespace in sorted(set(node.get_node_names_and_namespaces())):
-        full_name = node_full_name(name, namespace)
-        for found, types in get_action_client_names_and_types_by_node(node, name, namespace):
-            if found == action_name:
-                classes = [_reader_class(gid) for gid in readers.get(full_name, [])]
-                clients.append(ClientInfo(full_name, list(types),
-                                          _filtered_in(classes, writers), classes))
-        for found, types in get_action_server_names_and_types_by_node(node, name, namespace):
-            if found == action_name:
-                servers.append(ServerInfo(full_name, list(types),
-                                          _guarded(writers.get(full_name, []))))
+    clients = [ClientInfo(name, types, _filtered_in(classes, writers), classes)
+               for name, (types, gids) in readers.items()
+               for classes in [[_reader_class(gid) for gid in gids]]]
+    servers = [ServerInfo(name, types, _guarded(gids)) for name, (types, gids) in writers.items()]
     return sorted(clients), sorted(servers)
 
 
-def _endpoints_by_node(endpoints: Any) -> dict[str, list[bytes]]:
-    by_node: dict[str, list[bytes]] = {}
+_TYPE_SUFFIX = '_FeedbackMessage'
+
+
+def _endpoints_by_node(endpoints: Any) -> dict[str, tuple[list[str], list[bytes]]]:
+    """``{node: (action types, endpoint GIDs)}`` of a feedback topic's endpoints."""
+    by_node: dict[str, tuple[list[str], list[bytes]]] = {}
     for endpoint in endpoints:
-        by_node.setdefault(node_full_name(endpoint.node_name, endpoint.node_namespace),
-                           []).append(bytes(endpoint.endpoint_gid))
+        types, gids = by_node.setdefault(
+            node_full_name(endpoint.node_name, endpoint.node_namespace), ([], []))
+        action_type = endpoint.topic_type
+        if action_type.endswith(_TYPE_SUFFIX):
+            action_type = action_type[:-len(_TYPE_SUFFIX)]
+        if action_type not in types:
+            types.append(action_type)
+        gids.append(bytes(endpoint.endpoint_gid))
     return by_node
 
 
@@ -161,12 +164,13 @@ def _guarded(gids: list[bytes]) -> Optional[bool]:
     return all(known)
 
 
-def _filtered_in(classes: list[Optional[str]], writers: dict[str, list[bytes]]) -> str:
+def _filtered_in(classes: list[Optional[str]],
+                 writers: dict[str, tuple[list[str], list[bytes]]]) -> str:
     """:data:`FILTERED_IN` of a client node with feedback readers of these filter classes."""
     from cft_action import _rcl
 
     library_classes = (_rcl.UUID_FILTER_CLASS, _rcl.NODE_FILTER_CLASS)
-    guarded = [_guarded(gids) for gids in writers.values()]
+    guarded = [_guarded(gids) for _, gids in writers.values()]
     words = set()
     for filter_class in classes:
         if filter_class is None:

@@ -9,11 +9,15 @@ Every verb module has the same face, which :mod:`cft_action.cli` builds its pars
 - ``main(args, parser, prog) -> int``: runs the verb; returns the exit status.
 
 The modules import rclpy only when ``main`` runs, so that ``--help`` stays fast. What the topic
-verbs share is in :mod:`cft_action.topics.topic_api`.
+verbs share is in :mod:`cft_action.topics.topic_api`, what the action verbs share in
+:mod:`cft_action.action.action_api`.
 """
 
 #: The verbs of ``cft-action topic``, each a module of this package.
 TOPIC_VERBS = ('bw', 'echo', 'hz')
+
+#: The verbs of ``cft-action action``, by the module of this package that each is.
+ACTION_VERBS = {'info': 'action_info', 'list': 'action_list'}
 
 
 def examples(*command_lines: str) -> str:
