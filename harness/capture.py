@@ -36,7 +36,7 @@ import struct
 import sys
 import threading
 from collections import Counter
-from typing import Any, Iterator, Optional
+from typing import Any, Iterator, NamedTuple, Optional
 
 CATEGORIES = ('feedback data', 'feedback gap/heartbeat', 'status', 'discovery', 'other')
 
@@ -69,6 +69,8 @@ def _writer_ids(payload: bytes) -> list[tuple[int, bytes, bool]]:
 
 
 _PID_SENTINEL, _PID_CONTENT_FILTER_INFO = 0x0001, 0x0055
+#: Linux's SO_RCVBUFFORCE (asm-generic/socket.h), which Python's socket module does not name.
+_SO_RCVBUFFORCE = 33
 
 
 def _samples(payload: bytes) -> Iterator[tuple[int, int, str, bytes, bytes, int]]:
@@ -207,7 +209,12 @@ def _received_udp(interface: str, stop: threading.Event,
     sock = socket.socket(socket.AF_PACKET, socket.SOCK_RAW, socket.htons(3))  # ETH_P_ALL
     sock.bind((interface, 0))
     sock.settimeout(0.2)
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 * 1024 * 1024)
+    # Past net.core.rmem_max, as root may: a burst of large samples to several readers (4 MB of
+    # results in tests/test_replies.py) overflowed 8 MB while this thread lagged.
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, _SO_RCVBUFFORCE, 64 * 1024 * 1024)
+    except PermissionError:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 8 * 1024 * 1024)
     listening.set()
     try:
         while not stop.is_set():
@@ -225,18 +232,58 @@ def _received_udp(interface: str, stop: threading.Event,
         sock.close()
 
 
-def data_by_port(interface: str, writers: set[bytes], stop: threading.Event,
-                 listening: threading.Event) -> dict[int, dict[int, Optional[int]]]:
-    """The DATA submessages of ``writers`` received on ``interface`` until ``stop`` is set, by UDP
-    destination port (one port per reader's participant): sequence number -> the number of filter
-    signatures it carried (None: no ``PID_CONTENT_FILTER_INFO``; a repair counts once, the last
-    copy). Sets ``listening`` once the socket is bound. Unfragmented IPv4 datagrams only."""
-    found: dict[int, dict[int, Optional[int]]] = {}
+class PortTraffic(NamedTuple):
+    """What :func:`samples_by_port` saw for one UDP destination port."""
+    #: (writer GUID, sequence number) -> the number of filter signatures its DATA or DATA_FRAG
+    #: carried (None: no ``PID_CONTENT_FILTER_INFO``; a repair counts once, the last copy).
+    samples: dict[tuple[bytes, int], Optional[int]]
+    #: UDP payload bytes of the datagrams that name one of the writers (data, GAPs, heartbeats).
+    octets: int
+    #: Of those, the bytes of datagrams whose every DATA or fragment of the writers had come before
+    #: (repairs the writer sent again after a NACK).
+    resent_octets: int
+
+
+def _pieces(payload: bytes, writers: set[bytes]) -> set[tuple[bytes, int, int]]:
+    """(writer GUID, sequence number, first fragment: 0 for a DATA) of each DATA and DATA_FRAG of
+    ``writers`` in one RTPS datagram."""
+    return {(writer, sequence,
+             struct.unpack(order + 'I', body[20:24])[0] if kind == _DATA_FRAG else 0)
+            for kind, _, order, body, writer, sequence in _samples(payload) if writer in writers}
+
+
+def samples_by_port(interface: str, writers: set[bytes], stop: threading.Event,
+                    listening: threading.Event) -> dict[int, PortTraffic]:
+    """The DATA and DATA_FRAG submessages of ``writers`` received on ``interface`` until ``stop``
+    is set, and the bytes of the datagrams naming them, by UDP destination port (one port per
+    reader's participant). Sets ``listening`` once the socket is bound. Unfragmented IPv4
+    datagrams only."""
+    found: dict[int, PortTraffic] = {}
+    received: dict[int, set[tuple[bytes, int, int]]] = {}
     for port, payload in _received_udp(interface, stop, listening):
+        if payload[:4] != b'RTPS':
+            continue
+        prefix = payload[8:20]
+        if not any(prefix + entity in writers for _, entity, _ in _writer_ids(payload)):
+            continue
+        pieces, before = _pieces(payload, writers), received.setdefault(port, set())
+        again = bool(pieces) and pieces <= before
+        before.update(pieces)
+        seen = found.setdefault(port, PortTraffic({}, 0, 0))
+        found[port] = seen._replace(octets=seen.octets + len(payload),
+                                    resent_octets=seen.resent_octets + again * len(payload))
         for writer, sequence, signatures in filter_signatures(payload):
             if writer in writers:
-                found.setdefault(port, {})[sequence] = signatures
+                seen.samples[(writer, sequence)] = signatures
     return found
+
+
+def data_by_port(interface: str, writers: set[bytes], stop: threading.Event,
+                 listening: threading.Event) -> dict[int, dict[int, Optional[int]]]:
+    """:func:`samples_by_port`'s samples by sequence number alone (for one writer): sequence
+    number -> the number of filter signatures it carried."""
+    return {port: {sequence: signatures for (_, sequence), signatures in seen.samples.items()}
+            for port, seen in samples_by_port(interface, writers, stop, listening).items()}
 
 
 def writer_datagrams_by_port(interface: str, writers: set[bytes], stop: threading.Event,

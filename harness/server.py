@@ -1,9 +1,9 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 """The Fibonacci action server of every demo, benchmark and test, in a process of its own.
 
-Usage: ``python -m harness.server ACTION PERIOD_S [--pad N] [--depth N|all] [--result-timeout S]
-[--stats-every S] [--late-feedback S] [--executor single|multi] [--goal-depth N]
-[--hold-goals N] [--record-readers] [--mute-cancel]``
+Usage: ``python -m harness.server ACTION PERIOD_S [--pad N] [--result-pad N] [--depth N|all]
+[--result-timeout S] [--stats-every S] [--late-feedback S] [--executor single|multi]
+[--goal-depth N] [--hold-goals N] [--record-readers] [--mute-cancel]``
 
 Goal ``order`` is the number of feedback messages the goal gets (a negative order is rejected;
 cancels are accepted). Each feedback ``sequence`` is ``[k, seconds, nanoseconds] + [0] * PAD``:
@@ -12,7 +12,8 @@ on the same host can compute the latency from publish to its callback. The first
 goal is published in the first line of ``execute`` (as a real server that reports progress at
 once), the others by a ticker thread every PERIOD_S, on an absolute schedule so that the rate stays
 put when a tick takes long. The result's ``sequence`` is ``[feedback messages published for the
-goal]``, so that a client can count what it lost, canceled goals included. With
+goal]``, so that a client can count what it lost, canceled goals included; ``--result-pad N``
+appends N zeros to it (a large result: 25000 for 100 kB). With
 ``--late-feedback S``, a goal that succeeded gets one more feedback message (``k = order``) S
 seconds after its result, the way a sample lost on the way and resent arrives at a client.
 With ``--hold-goals N``, goals of positive order get their first feedback at once and then wait,
@@ -46,8 +47,9 @@ warns of while the goal runs),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
 line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and ``guard_filter_class`` (its call,
-filter-verdict, writer-limit and filter-class counters) and ``writers`` (the GUIDs of the
-feedback and status writers, in hex).
+filter-verdict, writer-limit and filter-class counters), ``guard_replies`` (its reply filter's)
+and ``writers`` (the GUIDs of the feedback and status writers, and of the ``send_goal``,
+``cancel_goal`` and ``get_result`` reply writers, in hex).
 ``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
 by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). ``READERS <json>``
 replies to ``readers``: with ``--record-readers``, per goal UUID in hex, the GIDs (hex) of the
@@ -215,7 +217,8 @@ class TickingServer:
                  result_timeout: int = DEFAULT_RESULT_TIMEOUT_S,
                  late_feedback: float = 0.0, goal_depth: Optional[int] = None,
                  hold_goals: int = 0, record_readers: bool = False,
-                 mute_cancel: bool = False, feedback_depth: Optional[int] = None) -> None:
+                 mute_cancel: bool = False, feedback_depth: Optional[int] = None,
+                 result_pad: int = 0) -> None:
         """Create the action server on ``node`` and start the ticker thread."""
         self.executor = executor
         self.started = time.monotonic()
@@ -228,6 +231,7 @@ class TickingServer:
         self.peak_active = 0
         self.period = period
         self.late_feedback = late_feedback
+        self.result_pad = result_pad
         self.late: list[tuple[float, Any, int]] = []  # (due, goal handle, k) after a success
         # A template copied per message: building a 2500-element list each time would cost the
         # server more CPU than the publish itself.
@@ -294,7 +298,7 @@ class TickingServer:
             goal_handle.canceled()
         else:
             goal_handle.succeed()
-        return Fibonacci.Result(sequence=[entry[1]])
+        return Fibonacci.Result(sequence=array.array('i', [entry[1]] + [0] * self.result_pad))
 
     def release(self, reason: str) -> None:
         """Let the held goals go on (``--hold-goals``); the first call counts."""
@@ -373,7 +377,8 @@ class TickingServer:
                     'guard': guard.status(), 'guard_calls': guard.call_counts(),
                     'guard_filter': guard.filter_counts(), 'guard_writers': guard.writer_limits(),
                     'guard_filter_class': guard.filter_class_counts(),
-                    'guard_heartbeats': guard.heartbeat_counts()}
+                    'guard_heartbeats': guard.heartbeat_counts(),
+                    'guard_replies': guard.reply_counts()}
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -381,6 +386,8 @@ def parse_args(argv: list[str]) -> argparse.Namespace:
     parser.add_argument('action')
     parser.add_argument('period', type=float, help='feedback period, s')
     parser.add_argument('--pad', type=int, default=0, help='int32 elements after the header')
+    parser.add_argument('--result-pad', type=int, default=0,
+                        help="int32 elements after the count in each goal's result")
     parser.add_argument('--depth', help="every queue's depth, or 'all' (default: rclpy's)")
     parser.add_argument('--result-timeout', type=int, default=DEFAULT_RESULT_TIMEOUT_S,
                         help='seconds a finished goal stays on the server')
@@ -417,11 +424,17 @@ def main(argv: list[str]) -> None:
     server = TickingServer(node, executor, args.action, args.period, args.pad, args.depth,
                            args.result_timeout, args.late_feedback, args.goal_depth,
                            args.hold_goals, args.record_readers, args.mute_cancel,
-                           args.feedback_depth)
+                           args.feedback_depth, args.result_pad)
     # The RTPS GUIDs of the feedback and status writers, to tell their packets apart on the wire.
     writers = {name: [bytes(info.endpoint_gid).hex() for info in
                       node.get_publishers_info_by_topic(f'{args.action}/_action/{name}')]
                for name in ('feedback', 'status')}
+    # And of the reply writers (rmw_fastrtps's topics rr/<service>Reply, outside ROS's names).
+    resolved = node.resolve_topic_name(args.action)
+    writers.update({name: [bytes(info.endpoint_gid[:16]).hex() for info in
+                           node.get_publishers_info_by_topic(f'rr{resolved}/_action/{name}Reply',
+                                                             no_mangle=True)]
+                    for name in ('send_goal', 'cancel_goal', 'get_result')})
     out = threading.Lock()
 
     def report() -> None:

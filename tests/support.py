@@ -41,19 +41,22 @@ def helper_process(module: str, args: Sequence[object] = (), *, env: Optional[di
 
 def action_server(action: str, period: float, *, env: Optional[dict] = None,
                   late_feedback: float = 0.0, mute_cancel: bool = False,
-                  feedback_depth: Optional[int] = None, timeout: float = 30.0) -> Proc:
+                  feedback_depth: Optional[int] = None, result_pad: int = 0,
+                  timeout: float = 30.0) -> Proc:
     """The project's Fibonacci action server (:mod:`harness.server`) with keep-all queues.
 
     rclpy's default depth of 10 drops requests when many clients send goals at once (measured:
     4 of 15 goals lost with 3 clients), and any keep-last queue drops when a client on a loaded
     machine lags: these tests are about filtering, so every queue keeps all. ``late_feedback``
     and ``mute_cancel``: see the server's ``--late-feedback`` and ``--mute-cancel``;
-    ``feedback_depth``: the feedback writer alone keeps that many (``--feedback-depth``).
+    ``feedback_depth``: the feedback writer alone keeps that many (``--feedback-depth``);
+    ``result_pad``: int32 elements appended to each result (``--result-pad``).
     """
     argv = python_module('harness.server', action, period, '--depth', 'all',
                          '--late-feedback', late_feedback,
                          *(['--mute-cancel'] if mute_cancel else []),
-                         *(['--feedback-depth', feedback_depth] if feedback_depth else []))
+                         *(['--feedback-depth', feedback_depth] if feedback_depth else []),
+                         *(['--result-pad', result_pad] if result_pad else []))
     return _started(Proc('server', argv, env or os.environ.copy()), 'READY', timeout)
 
 
@@ -290,38 +293,47 @@ UDP_ONLY = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4', 'ROS_AUTOMATIC_DISCOVERY_RANG
 
 
 class WireRun(NamedTuple):
-    """What :func:`feedback_on_the_wire` saw: the clients' reports, in order; what ``capture``
-    returned for the server's feedback writer; the server's stats at ``go`` and at the end."""
+    """What :func:`clients_on_the_wire` saw: the clients' reports, in order; what ``capture``
+    returned for the captured writers; the server's stats at ``go`` and at the end (its
+    ``writers`` name the GUIDs of its feedback, status and reply writers)."""
     reports: list[dict[str, Any]]
     captured: dict[int, Any]
     stats_at_go: dict[str, Any]
     stats_after: dict[str, Any]
 
 
-def feedback_on_the_wire(clients: Sequence[tuple[str, str]], capture: Callable[..., dict],
-                         goals: int, order: int, *, server_env: Optional[dict] = None,
-                         feedback_depth: Optional[int] = None) -> WireRun:
-    """Run a guarded server and one client process (tests/helpers/fib_client.py) per (mode,
-    writer_filtering), all on UDP only, each sending ``goals`` goals of ``order`` feedback
-    messages; capture on loopback with ``capture(interface, {writer}, stop, listening)`` (from
-    :mod:`harness.capture`, root only) while they run."""
+def clients_on_the_wire(clients: Sequence[Sequence[object]], capture: Callable[..., dict],
+                        writers: Sequence[str] = ('feedback',), *, guarded: bool = True,
+                        server_env: Optional[dict] = None, feedback_depth: Optional[int] = None,
+                        result_pad: int = 0, together: bool = False) -> WireRun:
+    """Run a server (guarded or not) and one client process (tests/helpers/fib_client.py) per
+    entry of ``clients`` (its arguments after the action: mode, goals, order[, writer_filtering]),
+    all on UDP only; capture on loopback with ``capture(interface, {writer GUIDs}, stop,
+    listening)`` (from :mod:`harness.capture`, root only) the traffic of the server's ``writers``
+    (names of harness.server's STATS ``writers``) while the clients' goals run. ``together``
+    starts the clients at once instead of one after another."""
     env = {**os.environ, **UDP_ONLY}
     action = '/' + unique_name('cft_wire')
-    server = action_server(action, 0.01, env=guard.environment({**env, **(server_env or {})}),
-                           feedback_depth=feedback_depth)
+    server_environment = {**env, **(server_env or {})}
+    server = action_server(action, 0.01, feedback_depth=feedback_depth, result_pad=result_pad,
+                           env=guard.environment(server_environment) if guarded
+                           else server_environment)
     stop, listening = threading.Event(), threading.Event()
     captured: dict[int, Any] = {}
     processes = []
     sniffer = None
     try:
-        writer = bytes.fromhex(server.request_json('stats', 'STATS')['writers']['feedback'][0])
-        # Each client proves its feedback path before READY; the capture starts after that, so
-        # it holds the measured goals' feedback only.
-        processes = [helper_process('tests.helpers.fib_client',
-                                    [action, mode, goals, order, filtering], env=env)
-                     for mode, filtering in clients]
+        named = server.request_json('stats', 'STATS')['writers']
+        guids = {bytes.fromhex(named[name][0]) for name in writers}
+        # Each client proves its goal service and feedback path before READY; the capture starts
+        # after that, so it holds the measured goals' traffic only.
+        processes = [helper_process('tests.helpers.fib_client', [action, *arguments], env=env,
+                                    ready='' if together else 'READY')
+                     for arguments in clients]
+        for process in processes if together else ():
+            process.expect('READY', 60)
         sniffer = threading.Thread(target=lambda: captured.update(
-            capture('lo', {writer}, stop, listening)))
+            capture('lo', guids, stop, listening)))
         sniffer.start()
         assert listening.wait(10)
         at_go = server.request_json('stats', 'STATS')
@@ -339,3 +351,12 @@ def feedback_on_the_wire(clients: Sequence[tuple[str, str]], capture: Callable[.
             process.stop()
         server.stop()
     return WireRun(reports, captured, at_go, after)
+
+
+def feedback_on_the_wire(clients: Sequence[tuple[str, str]], capture: Callable[..., dict],
+                         goals: int, order: int, *, server_env: Optional[dict] = None,
+                         feedback_depth: Optional[int] = None) -> WireRun:
+    """:func:`clients_on_the_wire` for a guarded server's feedback writer: one client per (mode,
+    writer_filtering), each sending ``goals`` goals of ``order`` feedback messages."""
+    return clients_on_the_wire([(mode, goals, order, filtering) for mode, filtering in clients],
+                               capture, server_env=server_env, feedback_depth=feedback_depth)

@@ -8,7 +8,9 @@ only sees the server in the graph, and a server that matched the client's feedba
 loses a goal's first feedback for any client. Then the line ``go`` sends GOALS goals of ORDER
 feedback messages each, waits for their results, and prints ``RESULT <json>``; its ``taken`` and
 ``dropped`` count from the client's creation, ``proof_taken`` is what the proof took of them;
-``reader_verdicts`` counts from the creation too, ``proof_verdicts`` is the proof's share.
+``reader_verdicts`` counts from the creation too, ``proof_verdicts`` is the proof's share;
+``responses_dropped`` and ``responses_passed``, from the creation, are the response filter's
+(other participants' goal, cancel and result replies dropped by its readers, and its own).
 """
 
 import json
@@ -98,7 +100,9 @@ def main() -> None:
             'proof_taken': proof.feedback_taken if proof else 0, 'proof_verdicts': proof_verdicts,
             'active': state.active, 'reason': state.reason, 'updates': state.updates,
             'held_goals': state.held_goals, 'arrival_timeouts': state.arrival_timeouts,
-            'filtered_in': state.filtered_in, 'reader_verdicts': client._reader.reader_verdicts}
+            'filtered_in': state.filtered_in, 'reader_verdicts': client._reader.reader_verdicts,
+            'responses_dropped': client.response_filter_state.dropped,
+            'responses_passed': client.response_filter_state.passed}
            if state else {}),
     }), flush=True)
     sys.stdin.readline()
