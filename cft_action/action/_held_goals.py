@@ -28,7 +28,7 @@ from unique_identifier_msgs.msg import UUID
 
 from cft_action.action._paused_timer import PausedTimer
 from cft_action._rclpy_compat import PromptLogger
-from cft_action.topics.arrival import ArrivalGate, ProbeTarget
+from cft_action.topics.arrival import ArrivalGate, ProbeTarget, RemotePublishers
 from cft_action.action.goal_filter import random_uuid4
 
 __all__ = ['HeldGoal', 'HeldGoals', 'cancel_goal_probe']
@@ -166,21 +166,27 @@ class HeldGoals:
                 'held_goals': self.count, 'arrival_timeouts': self._gate.timeouts,
                 'holds_suspended': self.suspended}
 
-    def await_server_proof(self, writer_is_remote: Callable[[], bool],
-                           timeout_sec: Optional[float], started: float) -> None:
+    def await_server_proof(self, writers: RemotePublishers, timeout_sec: Optional[float],
+                           started: float) -> None:
         """``wait_for_server``'s wait for the proof that the server has the feedback reader.
 
         Waits at most ``timeout`` seconds, and within ``timeout_sec`` from ``started`` (a
         monotonic time), unless the proof came, holding is suspended, or the feedback writer is in
-        this process. Call it without ``lock``.
+        this process. The server's services can be in the graph before its feedback writer: that
+        is waited for first, within the same time. Call it without ``lock``.
         """
         with self._lock:
-            if self._gate.is_confirmed(0) or self.suspended or not writer_is_remote():
+            if self._gate.is_confirmed(0) or self.suspended:
                 return
         left = self._timeout
         if timeout_sec is not None and timeout_sec >= 0:
             left = min(left, max(0.0, timeout_sec - (time.monotonic() - started)))
-        if not self.await_proof(time.monotonic() + left):
+        deadline = time.monotonic() + left
+        while not writers.seen() and time.monotonic() < deadline:
+            time.sleep(self._poll_period)
+        if not writers.any():
+            return
+        if not self.await_proof(deadline):
             self._logger.debug('wait_for_server: the server did not prove that it has the '
                                'feedback reader in time; the first goal will be held')
 

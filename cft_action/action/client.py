@@ -302,7 +302,7 @@ class ActionClient(CompatActionClient):
         if not super().wait_for_server(timeout_sec=timeout_sec):
             return False
         if self._filter.plan is not None:
-            self._held_goals.await_server_proof(self._feedback_writers.any, timeout_sec, started)
+            self._held_goals.await_server_proof(self._feedback_writers, timeout_sec, started)
         return True
 
     def destroy(self) -> None:

@@ -164,6 +164,10 @@ class RemotePublishers:
         """Whether a publisher may be in another participant: True while the own one is unknown."""
         return self.own() is None or bool(self.by_participant())
 
+    def seen(self) -> bool:
+        """Whether the graph shows a publisher of the topic, in any participant."""
+        return bool(self._node.get_publishers_info_by_topic(self._topic))
+
 
 class ProbeTarget(NamedTuple):
     """A service whose reply proves arrival: its type, name, a harmless request and the QoS."""
