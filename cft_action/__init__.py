@@ -34,6 +34,8 @@ if TYPE_CHECKING:
                                           ResponseFilterState)
     from cft_action.parameters.parameter_events import (ParameterEventFilterState,
                                                         ParameterEventHandler)
+    from cft_action.topics.rate import (active_subscription_count, poll, RateFilterState,
+                                        rate_filter_state, set_max_rate, stop_polling)
     from cft_action.topics.subscription import (ContentFilterOptions,
                                                 create_filtered_subscription, get_content_filter,
                                                 is_content_filter_supported, is_filtered,
@@ -53,6 +55,12 @@ _LAZY = {
     'is_content_filter_supported': 'topics.subscription',
     'is_filtered': 'topics.subscription',
     'set_content_filter': 'topics.subscription',
+    'RateFilterState': 'topics.rate',
+    'active_subscription_count': 'topics.rate',
+    'poll': 'topics.rate',
+    'rate_filter_state': 'topics.rate',
+    'set_max_rate': 'topics.rate',
+    'stop_polling': 'topics.rate',
 }
 
 # The public modules of the flat layout, and the modules they are now. ``import cft_action.sql``
@@ -101,6 +109,8 @@ __all__ = [
     'GoalStatusState', 'InvalidArgumentError', 'ParameterEventFilterState', 'ParameterEventHandler',
     'ContentFilterOptions', 'ResponseFilterState', 'create_filtered_subscription',
     'get_content_filter', 'is_content_filter_supported', 'is_filtered', 'set_content_filter',
+    'RateFilterState', 'active_subscription_count', 'poll', 'rate_filter_state', 'set_max_rate',
+    'stop_polling',
 ]
 
 

@@ -226,6 +226,9 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'cft_filter_class_begin': (_reader_lock, None, [ctypes.c_char_p], None),
     'cft_filter_class_end': (_reader_lock, _void_p, [], None),
     'cft_filter_class_verdicts': (_reader_lock, ctypes.c_ulong, [_void_p], None),
+    'cft_filter_class_accepts': (_reader_lock, ctypes.c_bool, [ctypes.c_char_p, ctypes.c_char_p],
+                                 None),
+    'cft_filter_class_rate_mismatches': (_reader_lock, ctypes.c_ulong, [], None),
     'cft_response_filter_install': (_reader_lock, ctypes.c_int, [], None),
     'cft_response_filter_error': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_response_filter_begin': (_reader_lock, None, [], None),
@@ -336,11 +339,25 @@ def set_content_filter(subscription_ptr: int, expression: str,
 
 
 #: The library's own filter classes (cft_action/native/_filter_class.h): goal_id.uuid of action
-#: feedback, and the node of a parameter event; and the status reader's
+#: feedback, the node of a parameter event, and a rate limit and poll count per writer (whose
+#: expressions are not DDS-SQL: cft_action/native/_rate_program.h); and the status reader's
 #: (cft_action/native/reader/_status_trim.h), which only this process's readers know.
 UUID_FILTER_CLASS = 'CFT_ACTION_UUID'
 NODE_FILTER_CLASS = 'CFT_ACTION_NODE'
+RATE_FILTER_CLASS = 'CFT_ACTION_RATE'
 STATUS_FILTER_CLASS = 'CFT_ACTION_STATUS'
+
+
+def filter_class_accepts(filter_class: str, expression: str) -> bool:
+    """Whether ``filter_class``, one of the library's, compiles ``expression`` in this build
+    (the rate class needs the Fast DDS layout of the headers the library was built against)."""
+    return _lib.cft_filter_class_accepts(filter_class.encode(), expression.encode())
+
+
+def rate_layout_mismatches() -> int:
+    """Samples that this process's rate filters passed unfiltered because their writer's GUID,
+    read at the headers' layout, did not look like one (0 on every stack tested)."""
+    return _lib.cft_filter_class_rate_mismatches()
 
 
 def filter_class_status() -> str:

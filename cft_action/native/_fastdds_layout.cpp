@@ -11,6 +11,7 @@
 // offsetof on classes that are not standard-layout, which GCC and Clang compute like any other.
 #include <fastrtps/config.h>
 #include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
+#include <fastdds/dds/topic/IContentFilter.hpp>
 #include <fastdds/rtps/builtin/data/ReaderProxyData.h>
 #include <fastdds/rtps/common/CacheChange.h>
 #include <fastdds/rtps/common/SerializedPayload.h>
@@ -21,6 +22,7 @@
 #include <cstddef>
 
 using eprosima::fastdds::dds::DataWriterQos;
+using eprosima::fastdds::dds::IContentFilter;
 using eprosima::fastdds::dds::WriterResourceLimitsQos;
 using eprosima::fastdds::rtps::ContentFilterProperty;
 using eprosima::fastrtps::ResourceLimitedVector;
@@ -80,6 +82,10 @@ void cft_fastdds_layout() {
          offsetof(CacheChange_t, write_params) + offsetof(WriteParams, related_sample_identity_) +
              offsetof(SampleIdentity, sequence_number_),
          "CacheChange_t::write_params.related_sample_identity().sequence_number()");
+  LAYOUT(FSI_WRITER_GUID,
+         offsetof(IContentFilter::FilterSampleInfo, sample_identity) +
+             offsetof(SampleIdentity, writer_guid_),
+         "IContentFilter::FilterSampleInfo::sample_identity.writer_guid() (GUID_t)");
   LAYOUT(RR_HISTORY, offsetof(RTPSReader, mp_history), "RTPSReader::mp_history");
   LAYOUT(RR_DATA_FILTER, offsetof(RTPSReader, data_filter_), "RTPSReader::data_filter_");
   LAYOUT(RH_READER, offsetof(ReaderHistory, mp_reader), "ReaderHistory::mp_reader");

@@ -15,8 +15,12 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include <time.h>
+
+#include "_fastdds_layout.h"
 #include "_filter_class.h"
 #include "_node_program.h"
+#include "_rate_program.h"
 #include "_uuid_program.h"
 
 #define RETCODE_OK 0u
@@ -43,8 +47,50 @@ static bool node_matches(const void *program, const void *payload) {
 
 static void *node_compile(const char *expression) { return cft_node_compile(expression); }
 
-static const struct cft_filter_grammar uuid_grammar = {uuid_compile, uuid_matches};
-static const struct cft_filter_grammar node_grammar = {node_compile, node_matches};
+// The writer of a sample: Fast DDS evaluates a filter on the serializedPayload member of the
+// sample's CacheChange_t (a writer's DataWriterFilteredChange in update_filter_info, a reader's
+// change in ContentFilteredTopicImpl::is_relevant), whose writerGUID is the writer's GUID on both
+// sides; the FilterSampleInfo's sample identity holds it too, but only where the writer sent it.
+// Offsets from the headers (_fastdds_layout.h); without headers the class compiles nothing, and a
+// subscription that asks for it is filtered in Python instead. A GUID whose entity kind is not a
+// user writer's, or that disagrees with a sample identity that is set, is a layout that is not
+// the loaded library's: the sample is passed, as to a plain reader, and counted.
+static unsigned long rate_layout_mismatches;
+
+static void *rate_compile(const char *expression) {
+  return CFT_LAYOUT_KNOWN ? cft_rate_compile(expression) : NULL;
+}
+
+static bool rate_decide(void *program, const void *payload, const void *sample_info) {
+#if CFT_LAYOUT_KNOWN
+  static const uint8_t unknown[16];
+  const uint8_t *writer = (const uint8_t *)payload - CC_PAYLOAD + CC_WRITER_GUID;
+  const uint8_t *identity = (const uint8_t *)sample_info + FSI_WRITER_GUID;
+  uint8_t kind = writer[15];
+  if ((kind != 0x02 && kind != 0x03) ||
+      (memcmp(identity, unknown, 16) != 0 && memcmp(identity, writer, 16) != 0)) {
+    __atomic_fetch_add(&rate_layout_mismatches, 1, __ATOMIC_RELAXED);
+    return true;
+  }
+  struct timespec now;
+  clock_gettime(CLOCK_MONOTONIC, &now);
+  return cft_rate_decide(program, writer, (int64_t)now.tv_sec * 1000000000 + now.tv_nsec);
+#else
+  (void)program, (void)payload, (void)sample_info;
+  return true;
+#endif
+}
+
+unsigned long cft_rate_layout_mismatches(void) {
+  return __atomic_load_n(&rate_layout_mismatches, __ATOMIC_RELAXED);
+}
+
+static void rate_carry(void *program, const void *replaced) { cft_rate_carry(program, replaced); }
+
+static const struct cft_filter_grammar uuid_grammar = {uuid_compile, uuid_matches, NULL, NULL};
+static const struct cft_filter_grammar node_grammar = {node_compile, node_matches, NULL, NULL};
+static const struct cft_filter_grammar rate_grammar = {rate_compile, NULL, rate_decide,
+                                                       rate_carry};
 
 // Of every filter of this library: verdicts, and filters created or changed (each is a filter
 // event at a writer or a reader of this process).
@@ -62,13 +108,15 @@ struct filter {
 
 static bool filter_evaluate(const struct filter *self, const void *payload,
                             const void *sample_info, const void *reader_guid) {
-  (void)sample_info;
   (void)reader_guid;
   struct filter *filter = (struct filter *)self;
   __atomic_fetch_add(&filter->verdicts, 1, __ATOMIC_RELAXED);
   __atomic_fetch_add(&total_verdicts, 1, __ATOMIC_RELAXED);
-  pthread_rwlock_rdlock(&filter->lock);
-  bool match = filter->grammar->matches(filter->program, payload);
+  const struct cft_filter_grammar *grammar = filter->grammar;
+  if (grammar->decide != NULL) pthread_rwlock_wrlock(&filter->lock);
+  else pthread_rwlock_rdlock(&filter->lock);
+  bool match = grammar->decide != NULL ? grammar->decide(filter->program, payload, sample_info)
+                                       : grammar->matches(filter->program, payload);
   pthread_rwlock_unlock(&filter->lock);
   return match;
 }
@@ -95,6 +143,7 @@ static uint32_t factory_create(const struct factory *self, const char *class_nam
   if (existing != NULL) {  // an update in place: Fast DDS hands back only this factory's filters
     pthread_rwlock_wrlock(&existing->lock);
     void *old = existing->program;
+    if (self->grammar->carry != NULL) self->grammar->carry(program, old);
     existing->program = program;
     pthread_rwlock_unlock(&existing->lock);
     free(old);
@@ -131,12 +180,15 @@ static const void *const factory_vtable[] = {(const void *)factory_create,
                                             (const void *)factory_delete};
 static const struct factory uuid_factory = {factory_vtable, &uuid_grammar};
 static const struct factory node_factory = {factory_vtable, &node_grammar};
+static const struct factory rate_factory = {factory_vtable, &rate_grammar};
 static struct factory own_factory = {factory_vtable, NULL};  // the owner's own class
 
 static const struct {
   const char *name;
   const struct factory *factory;
-} classes[] = {{CFT_UUID_CLASS, &uuid_factory}, {CFT_NODE_CLASS, &node_factory}};
+} classes[] = {{CFT_UUID_CLASS, &uuid_factory},
+               {CFT_NODE_CLASS, &node_factory},
+               {CFT_RATE_CLASS, &rate_factory}};
 
 static int class_index(const char *class_name) {
   for (int i = 0; class_name != NULL && i < (int)(sizeof classes / sizeof classes[0]); i++)
@@ -162,7 +214,7 @@ void *cft_filter_factory_for(const char *class_name, const struct cft_filter_cla
 
 const struct cft_filter_grammar *cft_filter_class_grammar(const char *class_name) {
   int i = class_index(class_name);
-  return i < 0 ? NULL : classes[i].factory->grammar;
+  return i < 0 || classes[i].factory->grammar->decide != NULL ? NULL : classes[i].factory->grammar;
 }
 
 void *cft_filter_grammar_compile(const struct cft_filter_grammar *grammar, const char *expression) {
@@ -172,6 +224,14 @@ void *cft_filter_grammar_compile(const struct cft_filter_grammar *grammar, const
 bool cft_filter_grammar_matches(const struct cft_filter_grammar *grammar, const void *program,
                                 const void *payload) {
   return grammar->matches(program, payload);
+}
+
+bool cft_filter_class_compiles(const char *class_name, const char *expression) {
+  int i = class_index(class_name);
+  void *program =
+      i < 0 || expression == NULL ? NULL : classes[i].factory->grammar->compile(expression);
+  free(program);
+  return program != NULL;
 }
 
 unsigned long cft_filter_verdicts(const void *filter) {

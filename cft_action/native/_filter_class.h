@@ -4,7 +4,12 @@
 // - CFT_ACTION_UUID, for action feedback: the goal_id.uuid grammar of _uuid_program.h, on the 16
 //   uuid bytes;
 // - CFT_ACTION_NODE, for /parameter_events: the node-name grammar of _node_program.h, on the
-//   event's node string.
+//   event's node string;
+// - CFT_ACTION_RATE, for any topic: a rate limit and a poll count per writer (_rate_program.h),
+//   which reads no byte of the sample: its verdict has state, decided once per sample where the
+//   filter runs. The guard does not keep its readers itself (cft_filter_class_grammar): Fast DDS
+//   evaluates it once per sample and reader when the sample is written, and its verdict travels in
+//   the sample's filter signature, so that the reader does not decide again.
 //
 // Fast DDS 2.14 builds a writer-side filter for a reader only when the writer's participant has a
 // factory for the reader's filter class (ReaderFilterCollection::update_entry asks
@@ -24,6 +29,7 @@
 
 #define CFT_UUID_CLASS "CFT_ACTION_UUID"
 #define CFT_NODE_CLASS "CFT_ACTION_NODE"
+#define CFT_RATE_CLASS "CFT_ACTION_RATE"
 
 // What a writer that filters for these classes (a writer of a guarded process) adds to its
 // USER_DATA, after rmw's "typehash=...;" (a key=value; pair, which rmw's parser skips): the
@@ -32,10 +38,15 @@
 #define CFT_WRITER_MARK "cft_action=filters;"
 
 // A class's grammar: how an expression compiles to a program (one malloc'd block, or NULL outside
-// the grammar), and a program's verdict on a serialized sample (a SerializedPayload_t *).
+// the grammar), and a program's verdict on a serialized sample (a SerializedPayload_t *). A class
+// whose verdict has state gives `decide` instead of `matches`, with the sample's
+// IContentFilter::FilterSampleInfo, and `carry`, which moves the state of the program an update
+// replaces into the new one; its filter's lock is then taken exclusively for each verdict.
 struct cft_filter_grammar {
   void *(*compile)(const char *expression);
   bool (*matches)(const void *program, const void *payload);
+  bool (*decide)(void *program, const void *payload, const void *sample_info);
+  void (*carry)(void *program, const void *replaced);
 };
 
 // What the library that links this file decides about the filters of its process: whether a
@@ -60,8 +71,9 @@ void *cft_filter_factory_for(const char *class_name, const struct cft_filter_cla
 // This library's own copy of `class_name` if it names one of these classes, else NULL.
 const char *cft_filter_class_name(const char *class_name);
 
-// The grammar of `class_name` if it names one of these classes, else NULL: for verdicts that the
-// guard gives without a filter instance (_guard_filter.c, "readers the guard keeps itself").
+// The grammar of `class_name` if it names one of these classes whose verdict has no state, else
+// NULL: for verdicts that the guard gives without a filter instance (_guard_filter.c, "readers the
+// guard keeps itself").
 struct cft_filter_grammar;
 const struct cft_filter_grammar *cft_filter_class_grammar(const char *class_name);
 // `expression` compiled in `grammar`: one malloc'd block (free() it), or NULL outside the grammar.
@@ -69,6 +81,13 @@ void *cft_filter_grammar_compile(const struct cft_filter_grammar *grammar, const
 // The program's verdict on a SerializedPayload_t, exactly as a filter of the class gives it.
 bool cft_filter_grammar_matches(const struct cft_filter_grammar *grammar, const void *program,
                                 const void *payload);
+
+// Whether `class_name` is one of these classes and compiles `expression` in this build.
+bool cft_filter_class_compiles(const char *class_name, const char *expression);
+
+// How many samples the rate class passed because their writer's GUID did not look like one (the
+// layout of the headers is not the loaded library's); 0 on every stack it was tested on.
+unsigned long cft_rate_layout_mismatches(void);
 
 // How many verdicts `filter` has given since it was created.
 unsigned long cft_filter_verdicts(const void *filter);

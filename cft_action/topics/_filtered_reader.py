@@ -58,9 +58,11 @@ def set_filter(subscription_ptr: int, topic: str, expression: str,
 
 def apply_filter(subscription_ptr: int, topic: str, expression: str,
                  expression_parameters: Sequence[Literal] = (), *,
-                 filter_class: Optional[str] = None) -> tuple[ContentFilterOptions, Optional[int]]:
+                 filter_class: Optional[str] = None,
+                 sql_expression: bool = True) -> tuple[ContentFilterOptions, Optional[int]]:
     """:func:`set_filter`, optionally with one of the library's filter classes
-    (:func:`_rcl.set_content_filter`).
+    (:func:`_rcl.set_content_filter`). ``sql_expression=False``: the expression is one of
+    ``_rcl.RATE_FILTER_CLASS``'s, which that class's own grammar checks, not DDS-SQL.
 
     :return: the filter as set, and the filter object it created in this process, if any.
     :raises ContentFilterError: naming the expression and the topic, with rcl's error string, if
@@ -81,7 +83,8 @@ def apply_filter(subscription_ptr: int, topic: str, expression: str,
             f'content filter {expression!r} on {topic}: bad expression parameter: {e}') from e
     described = f'content filter {expression!r} with parameters {parameters} on {topic}'
     try:
-        sql.check_filter(expression, parameters)
+        if sql_expression:
+            sql.check_filter(expression, parameters)
     except sql.FilterError as e:
         raise ContentFilterError(f'{described} was rejected: {e.reason}') from e
     with _rcl_lock:

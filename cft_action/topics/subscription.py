@@ -31,7 +31,9 @@ from cft_action.topics.message_types import first_primitive_field
 from cft_action._rclpy_compat import (declare_qos_parameters, new_rcl_subscription,
                                       register_subscription, validate_qos_or_depth,
                                       validate_topic_name)
+from cft_action import _rcl
 from cft_action.errors import ContentFilterError, InvalidArgumentError
+from cft_action.topics import rate
 from cft_action.topics.filters import ContentFilterOptions, Literal, never_match_on
 
 __all__ = [
@@ -95,6 +97,8 @@ def create_filtered_subscription(
     event_callbacks: Optional[SubscriptionEventCallbacks] = None,
     qos_overriding_options: Optional[QoSOverridingOptions] = None,
     raw: bool = False,
+    max_rate: Optional[float] = None,
+    poll: Optional[int] = None,
 ) -> Subscription:
     """
     Create a subscription whose messages are filtered by the middleware.
@@ -128,10 +132,26 @@ def create_filtered_subscription(
     :param qos_overriding_options: Options to allow overriding QoS parameters.
     :param raw: If ``True``, then received messages will be stored in raw binary
         representation.
+    :param max_rate: At most this many messages per second from each publisher, decided by the
+        publisher where it runs under ``cft-action guard`` (:mod:`cft_action.topics.rate`). Takes
+        no expression: a reader has one filter class, and the rate's is not DDS-SQL.
+    :param poll: Receive only polled messages: this many of each publisher now (``0``: none), more
+        with :func:`cft_action.poll`. Combines with ``max_rate``; takes no expression either.
     :return: An ordinary :class:`rclpy.subscription.Subscription`.
     :raises ContentFilterError: if the filter cannot be applied; the message names the expression
         and carries rcl's error string. No subscription is left behind.
+    :raises InvalidArgumentError: if ``max_rate`` is not positive and finite, ``poll`` is not a
+        whole number ``>= 0``, or either comes with an expression.
     """
+    if max_rate is not None or poll is not None:
+        if filter_expression or expression_parameters or content_filter_options is not None:
+            raise InvalidArgumentError(
+                'max_rate and poll take no filter expression: a subscription has one filter '
+                "class, and theirs decides per publisher, not on the message's fields")
+        return _subscribe_rate_limited(
+            node, msg_type, topic, callback, qos_profile, rate.RateFilter(max_rate, poll),
+            callback_group=callback_group, event_callbacks=event_callbacks,
+            qos_overriding_options=qos_overriding_options, raw=raw)
     if content_filter_options is not None:
         if filter_expression or expression_parameters:
             raise InvalidArgumentError('give the filter either as content_filter_options or as '
@@ -146,6 +166,40 @@ def create_filtered_subscription(
         qos_overriding_options=qos_overriding_options, raw=raw)[0]
 
 
+def _subscribe_rate_limited(node: Node, msg_type, topic: str, callback: Callable,
+                            qos_profile: Union[QoSProfile, int], rate_filter: rate.RateFilter,
+                            **options) -> Subscription:
+    """A subscription filtered by ``rate_filter``: with the library's rate class, or, where that
+    cannot be used (another rmw, the class not available), by a gate in Python, said once."""
+    reason = ''
+    if not is_content_filter_supported(node):
+        reason = f'{rclpy.get_rmw_implementation_identifier()} has no content filtering'
+    else:
+        reason = _rcl.filter_class_status()
+    if not reason and not _rcl.filter_class_accepts(_rcl.RATE_FILTER_CLASS,
+                                                     rate_filter.expression()):
+        reason = ('the rate filter class is not in this build of cft_action (it was built '
+                  'without the Fast DDS headers)')
+    if not reason:
+        try:
+            subscription, rate_filter.created = subscribe_filtered(
+                node, msg_type, topic, callback, qos_profile, rate_filter.expression(), (),
+                filter_class=_rcl.RATE_FILTER_CLASS, sql_expression=False, **options)
+        except ContentFilterError as e:
+            if e.function is None:
+                raise  # not the middleware's refusal: a bad topic, or the like
+            reason = str(e)
+    if reason:
+        rate_filter.reason = reason
+        node.get_logger().info(
+            f'{topic}: max_rate and poll are applied in Python, to all publishers together, '
+            f'since the middleware cannot filter this subscription: {reason}', once=True)
+        subscription = node.create_subscription(msg_type, topic, rate_filter.gate(callback),
+                                                qos_profile, **options)
+    rate.register(subscription, rate_filter)
+    return subscription
+
+
 def subscribe_filtered(
     node: Node,
     msg_type,
@@ -156,6 +210,7 @@ def subscribe_filtered(
     expression_parameters: Sequence[Literal],
     *,
     filter_class: Optional[str] = None,
+    sql_expression: bool = True,
     callback_group: Optional[CallbackGroup] = None,
     event_callbacks: Optional[SubscriptionEventCallbacks] = None,
     qos_overriding_options: Optional[QoSOverridingOptions] = None,
@@ -164,6 +219,7 @@ def subscribe_filtered(
     """:func:`create_filtered_subscription` with a non-empty filter, optionally in one of the
     library's filter classes (:func:`cft_action._rcl.set_content_filter`).
 
+    :param sql_expression: False for an expression of the rate class, which is not DDS-SQL.
     :return: the subscription, and the class's filter object that this process created for it
         (None for DDS-SQL, or when the preloaded guard created it).
     """
@@ -189,7 +245,8 @@ def subscribe_filtered(
     try:
         with subscription_object:
             created = apply_filter(subscription_object.pointer, final_topic, filter_expression,
-                                   expression_parameters, filter_class=filter_class)[1]
+                                   expression_parameters, filter_class=filter_class,
+                                   sql_expression=sql_expression)[1]
         subscription = Subscription(
             subscription_object, msg_type, topic, callback, callback_group, qos_profile, raw,
             event_callbacks=event_callbacks or SubscriptionEventCallbacks())

@@ -8,6 +8,9 @@ Usage: ``python -m tests.helpers.publisher PREFIX [DEPTH]``: reliable, keep-last
              publish samples 0..N-1 on every topic, PERIOD seconds apart; replies SENT N
   flood S    publish ints 0, 1, ... as fast as it can for S seconds (a 1 ms pause every 50
              samples lets discovery run); replies SENT N
+  steady HZ S BASE
+             publish ints BASE, BASE + 1, ... at HZ for S seconds, on an absolute schedule;
+             replies SENT N
 """
 
 import sys
@@ -52,6 +55,14 @@ def main() -> None:
                     publisher.publish(make(i))
                 if period:
                     time.sleep(float(period))
+            print(f'SENT {count}', flush=True)
+        elif command == 'steady':
+            hz, seconds, base = argument.split()
+            publisher, make = publishers['ints']
+            start, count = time.monotonic(), round(float(hz) * float(seconds))
+            for i in range(count):
+                time.sleep(max(0.0, start + i / float(hz) - time.monotonic()))
+                publisher.publish(make(int(base) + i))
             print(f'SENT {count}', flush=True)
         elif command == 'flood':
             publisher, make = publishers['ints']

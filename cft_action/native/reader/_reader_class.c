@@ -92,6 +92,14 @@ EXPORT void *cft_filter_class_end(void) {
   return filter;
 }
 
+// Whether one of the shared classes compiles `expression` in this build: asked before a first
+// filter, since a first filter that rmw_fastrtps cannot create leaves its reader dangling.
+EXPORT bool cft_filter_class_accepts(const char *class_name, const char *expression) {
+  return cft_filter_class_compiles(class_name, expression);
+}
+
+EXPORT unsigned long cft_filter_class_rate_mismatches(void) { return cft_rate_layout_mismatches(); }
+
 EXPORT unsigned long cft_filter_class_verdicts(const void *filter) {
   return filter != NULL ? cft_filter_verdicts(filter) : 0;
 }

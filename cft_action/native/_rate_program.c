@@ -1,0 +1,85 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// See _rate_program.h.
+#include "_rate_program.h"
+
+#include <inttypes.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+// Writers a reader's program tells apart. A writer beyond them is passed unfiltered (as to a plain
+// reader); a writer-side program sees one writer only, its own.
+#define RATE_WRITERS 64
+
+struct rate_writer {
+  uint8_t guid[16];
+  bool passed;          // a sample of this writer has passed: next_ns holds
+  int64_t next_ns;      // the earliest time the next sample may pass
+  uint64_t remaining;   // polled samples still to pass
+  uint64_t seen_total;  // the poll total this writer's `remaining` includes
+};
+
+struct rate_program {
+  int64_t period_ns;
+  bool polling;
+  uint64_t total, last;
+  int writers;
+  struct rate_writer writer[RATE_WRITERS];
+};
+
+struct rate_program *cft_rate_compile(const char *expression) {
+  if (expression == NULL) return NULL;
+  int64_t period;
+  uint64_t total = 0, last = 0;
+  int end = -1, polled_end = -1;
+  if (sscanf(expression, "period=%" SCNd64 "%n poll=%" SCNu64 "/%" SCNu64 "%n", &period, &end,
+             &total, &last, &polled_end) < 1 || end < 0 || period < 0)
+    return NULL;
+  bool polling = polled_end > 0;
+  if (expression[polling ? polled_end : end] != '\0' || (polling && last > total)) return NULL;
+  struct rate_program *p = calloc(1, sizeof *p);
+  if (p == NULL) return NULL;
+  p->period_ns = period;
+  p->polling = polling;
+  p->total = total;
+  p->last = last;
+  return p;
+}
+
+static struct rate_writer *writer_of(struct rate_program *p, const uint8_t *guid) {
+  for (int i = 0; i < p->writers; i++)
+    if (memcmp(p->writer[i].guid, guid, 16) == 0) return &p->writer[i];
+  if (p->writers == RATE_WRITERS) return NULL;
+  struct rate_writer *w = &p->writer[p->writers++];
+  memcpy(w->guid, guid, 16);
+  w->remaining = p->last;
+  w->seen_total = p->total;
+  return w;
+}
+
+bool cft_rate_decide(struct rate_program *p, const uint8_t *writer_guid, int64_t now_ns) {
+  struct rate_writer *w = writer_of(p, writer_guid);
+  if (w == NULL) return true;
+  if (p->polling && w->remaining == 0) return false;
+  if (p->period_ns > 0 && w->passed && now_ns < w->next_ns) return false;
+  w->passed = true;
+  w->next_ns = now_ns + p->period_ns;
+  if (p->polling) w->remaining--;
+  return true;
+}
+
+void cft_rate_carry(struct rate_program *to, const struct rate_program *from) {
+  to->writers = from->writers;
+  memcpy(to->writer, from->writer, sizeof to->writer[0] * (size_t)from->writers);
+  for (int i = 0; i < to->writers; i++) {
+    struct rate_writer *w = &to->writer[i];
+    if (!to->polling) {
+      w->remaining = 0, w->seen_total = to->total;
+    } else if (!from->polling) {  // polling starts: each writer gets the last poll's count
+      w->remaining = to->last, w->seen_total = to->total;
+    } else if (to->total >= w->seen_total) {
+      w->remaining += to->total - w->seen_total, w->seen_total = to->total;
+    }
+  }
+}

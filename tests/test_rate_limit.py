@@ -1,0 +1,140 @@
+"""Rate-limited and polled subscriptions (cft_action.topics.rate), against publishers in other
+processes, guarded (the publisher decides) and not (this process's reader decides)."""
+
+import math
+from collections import Counter
+
+import pytest
+from rclpy.qos import QoSProfile, ReliabilityPolicy
+from std_msgs.msg import Int32
+
+from cft_action import (create_filtered_subscription, guard, InvalidArgumentError, poll,
+                        rate_filter_state, set_max_rate, stop_polling)
+from harness.ros import unique_name
+from tests.support import helper_process
+
+# Reliable with a short history: a reader that the writer filters must never stall on its gaps.
+QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
+SOURCE_HZ = 100
+# Each publisher's messages are BASE + i: the hundreds say which publisher sent one.
+BASES = (0, 100000)
+
+
+@pytest.fixture(params=['guarded', 'unguarded'])
+def publishers(request):
+    """Two publishers of ints on one topic, each in its own process."""
+    prefix = '/' + unique_name('cft_rate')
+    env = guard.environment() if request.param == 'guarded' else None
+    children = [helper_process('tests.helpers.publisher', [prefix, 10], env=env) for _ in BASES]
+    try:
+        yield prefix + '/ints', children, request.param
+    finally:
+        for child in children:
+            child.stop()
+
+
+def subscribe(ros, topic, **rate):
+    received: list[int] = []
+    subscription = create_filtered_subscription(ros.node, Int32, topic,
+                                                lambda m: received.append(m.data), QOS, **rate)
+    return subscription, received
+
+
+def per_publisher(received):
+    return Counter(data // BASES[1] for data in received)
+
+
+def publish(children, topic, seconds, ros):
+    """Both publishers at SOURCE_HZ for ``seconds``, while this process spins."""
+    for child in children:
+        assert child.request('wait ints 1', 'MATCHED') == 'MATCHED'
+    for child, base in zip(children, BASES):
+        child.send(f'steady {SOURCE_HZ} {seconds} {base}')
+    for child in children:
+        ros.spin_until(lambda c=child: c.last('SENT') is not None, timeout=seconds + 20)
+
+
+def assert_where(ros, subscription, mode):
+    state = rate_filter_state(subscription, ros.node)
+    assert state.layout_mismatches == 0, state
+    if mode == 'guarded':
+        assert state.filtered_in == 'writer', state
+        assert state.reader_verdicts == 0, state  # the writers decided: no re-evaluation
+    else:
+        assert state.filtered_in in ('reader', 'unknown'), state
+        assert state.reader_verdicts > 0, state
+
+
+def test_max_rate_per_publisher(ros, publishers):
+    topic, children, mode = publishers
+    hz, seconds = 5, 4
+    subscription, received = subscribe(ros, topic, max_rate=hz)
+    publish(children, topic, seconds, ros)
+    ros.spin_for(0.5)
+    counts = per_publisher(received)
+    for index in range(len(BASES)):
+        # at most one per 1/HZ (the first comes at once), and the first after each interval
+        assert 0.9 * hz * seconds <= counts[index] <= hz * seconds + 1, counts
+    assert_where(ros, subscription, mode)
+
+
+def test_polls_are_exact_per_publisher(ros, publishers):
+    topic, children, mode = publishers
+    subscription, received = subscribe(ros, topic, poll=0)
+    for child in children:
+        assert child.request('wait ints 1', 'MATCHED') == 'MATCHED'
+    for child, base in zip(children, BASES):
+        child.send(f'steady {SOURCE_HZ} 6 {base}')
+    ros.spin_for(0.5)
+    assert received == []  # poll=0: nothing until a poll
+    for round_ in range(1, 4):
+        poll(subscription, 2)
+        assert ros.spin_until(lambda r=round_: len(received) >= 4 * r, timeout=3), received
+        ros.spin_for(0.3)  # nothing more comes
+        assert per_publisher(received) == {0: 2 * round_, 1: 2 * round_}, received
+    assert rate_filter_state(subscription, ros.node).polled == 6
+    stop_polling(subscription)
+    assert ros.spin_until(lambda: len(received) > 30, timeout=3)
+    for child in children:
+        ros.spin_until(lambda c=child: c.last('SENT') is not None, timeout=20)
+    assert_where(ros, subscription, mode)
+
+
+def test_max_rate_can_be_changed_and_lifted(ros, publishers):
+    topic, children, _ = publishers
+    subscription, received = subscribe(ros, topic, max_rate=2)
+    set_max_rate(subscription, 1000)
+    ros.spin_for(0.5)  # the change reaches the writers by discovery
+    publish(children, topic, 1, ros)
+    ros.spin_for(0.5)
+    assert min(per_publisher(received).values()) >= 0.9 * SOURCE_HZ
+    set_max_rate(subscription, None)
+    assert rate_filter_state(subscription, ros.node).max_rate is None
+
+
+@pytest.mark.parametrize('rate, message', [
+    ({'max_rate': 0}, 'max_rate=0'), ({'max_rate': -1.0}, 'max_rate=-1.0'),
+    ({'max_rate': math.nan}, 'max_rate=nan'), ({'max_rate': 'fast'}, "max_rate='fast'"),
+    ({'poll': -1}, 'poll=-1'), ({'poll': 1.5}, 'poll=1.5'),
+    ({'max_rate': 2, 'filter_expression': 'data > 1'}, 'take no filter expression'),
+])
+def test_bad_arguments_name_themselves_and_leave_no_subscription(ros, rate, message):
+    before = len(list(ros.node.subscriptions))
+    with pytest.raises(InvalidArgumentError, match=message.replace('(', r'\(')):
+        create_filtered_subscription(ros.node, Int32, '/' + unique_name('bad'), print, QOS,
+                                     **rate)
+    assert len(list(ros.node.subscriptions)) == before
+
+
+def test_poll_needs_a_polled_subscription(ros):
+    rated, _ = subscribe(ros, '/' + unique_name('rated'), max_rate=1)
+    with pytest.raises(InvalidArgumentError, match='created without poll='):
+        poll(rated, 1)
+    with pytest.raises(InvalidArgumentError, match='created without poll='):
+        stop_polling(rated)
+    polled, _ = subscribe(ros, '/' + unique_name('polled'), poll=0)
+    with pytest.raises(InvalidArgumentError, match='n=-1'):
+        poll(polled, -1)
+    plain = ros.node.create_subscription(Int32, '/' + unique_name('plain'), print, QOS)
+    with pytest.raises(InvalidArgumentError, match='not created with max_rate or poll'):
+        set_max_rate(plain, 1)
