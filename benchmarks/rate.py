@@ -263,9 +263,22 @@ def _matched(pub: Proc, count: int) -> None:
 
 def part_bytes(run: Run, pub: Proc, topic: str) -> dict[str, Any]:
     """Part 1: the bytes per second each kind of subscriber receives, side by side."""
+    out = bytes_received(run, pub, topic, KINDS)
+    plain = out['kinds']['plain']
+    out['bytes_per_message_plain'] = plain['rx_bytes_per_s'] / plain['messages_per_s']
+    out['ideal_bytes_per_s'] = run.args.max_rate * out['bytes_per_message_plain']
+    rate = out['kinds']['rate']['rx_bytes_per_s']
+    out['rate_to_ideal'] = rate / out['ideal_bytes_per_s']
+    out['rate_to_plain'] = rate / plain['rx_bytes_per_s']
+    out['rate_to_relay'] = rate / out['kinds']['relay']['rx_bytes_per_s']
+    return out
+
+
+def bytes_received(run: Run, pub: Proc, topic: str, kinds: Sequence[str]) -> dict[str, Any]:
+    """The bytes and messages per second that subscribers of ``kinds`` receive, side by side."""
     args = run.args
-    subs = {kind: run.start(kind, 'subscriber', topic, kind, 1, args.max_rate) for kind in KINDS}
-    _matched(pub, len(KINDS))
+    subs = {kind: run.start(kind, 'subscriber', topic, kind, 1, args.max_rate) for kind in kinds}
+    _matched(pub, len(kinds))
     time.sleep(args.warmup)
     before = {k: (netns.interface_counters(p.pid), p.request_json('stats', 'STATS'))
               for k, p in subs.items()}
@@ -275,7 +288,7 @@ def part_bytes(run: Run, pub: Proc, topic: str) -> dict[str, Any]:
              for k, p in subs.items()}
     seconds = time.monotonic() - started
     out: dict[str, Any] = {'window_s': seconds, 'kinds': {}}
-    for kind in KINDS:
+    for kind in kinds:
         (net0, st0), (net1, st1) = before[kind], after[kind]
         assert net0 is not None and net1 is not None
         out['kinds'][kind] = {
@@ -284,13 +297,6 @@ def part_bytes(run: Run, pub: Proc, topic: str) -> dict[str, Any]:
             'messages_per_s': (st1['received'][0] - st0['received'][0]) / seconds,
             'cpu_s_per_s': (st1['cpu_s'] - st0['cpu_s']) / seconds,
             'filtered_in': st1['filtered_in'][0] if st1['filtered_in'] else 'plain'}
-    plain = out['kinds']['plain']
-    out['bytes_per_message_plain'] = plain['rx_bytes_per_s'] / plain['messages_per_s']
-    out['ideal_bytes_per_s'] = args.max_rate * out['bytes_per_message_plain']
-    rate = out['kinds']['rate']['rx_bytes_per_s']
-    out['rate_to_ideal'] = rate / out['ideal_bytes_per_s']
-    out['rate_to_plain'] = rate / plain['rx_bytes_per_s']
-    out['rate_to_relay'] = rate / out['kinds']['relay']['rx_bytes_per_s']
     run.stop_clients()
     return out
 
@@ -374,6 +380,12 @@ def markdown(results: dict[str, Any]) -> str:
                    f"{part['ideal_bytes_per_s']:,.0f} B/s; rate-limited / ideal "
                    f"{part['rate_to_ideal']:.2f}, / plain {part['rate_to_plain']:.4f}, / relay "
                    f"{part['rate_to_relay']:.4f}\n")
+    alone = results.get('bytes_alone')
+    if alone:
+        mine = alone['kinds']['rate']
+        out.append(f"`max_rate` alone on the writer: {mine['rx_bytes_per_s']:,.0f} B/s, "
+                   f"{mine['messages_per_s']:.2f} messages/s, / ideal {alone['rate_to_ideal']:.2f}"
+                   f"\n")
     rows = results.get('cpu')
     if rows:
         counts = sorted({r['subscribers'] for r in rows if r['subscribers']})
@@ -473,7 +485,17 @@ def main(argv: list[str]) -> int:
                 else:
                     pub = run.start('publisher', 'publisher', topic, args.hz, args.size, 0,
                                     server=True)
-                    results[part] = (part_bytes if part == 'bytes' else part_cpu)(run, pub, topic)
+                    if part == 'bytes':
+                        results['bytes'] = part_bytes(run, pub, topic)
+                        # The same subscriber alone on the writer: the side-by-side plain
+                        # readers make the writer send it a GAP and a heartbeat per message.
+                        progress('part bytes: max_rate alone')
+                        alone = bytes_received(run, pub, topic, ('rate',))
+                        alone['rate_to_ideal'] = (alone['kinds']['rate']['rx_bytes_per_s']
+                                                  / results['bytes']['ideal_bytes_per_s'])
+                        results['bytes_alone'] = alone
+                    else:
+                        results['cpu'] = part_cpu(run, pub, topic)
             finally:
                 run.close()
             save()
