@@ -8,10 +8,14 @@ import pytest
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Int32
 
-from cft_action import (create_filtered_subscription, guard, InvalidArgumentError, poll,
-                        rate_filter_state, set_max_rate, stop_polling)
+from action_msgs.msg import GoalStatus
+from test_msgs.action import Fibonacci
+from rclpy.action import ActionClient as RclpyActionClient
+
+from cft_action import (ActionClient, create_filtered_subscription, guard, InvalidArgumentError,
+                        poll, rate_filter_state, set_max_rate, stop_polling)
 from harness.ros import unique_name
-from tests.support import helper_process
+from tests.support import action_server, helper_process, prove_feedback_path, result_of, send
 
 # Reliable with a short history: a reader that the writer filters must never stall on its gaps.
 QOS = QoSProfile(depth=10, reliability=ReliabilityPolicy.RELIABLE)
@@ -138,3 +142,38 @@ def test_poll_needs_a_polled_subscription(ros):
     plain = ros.node.create_subscription(Int32, '/' + unique_name('plain'), print, QOS)
     with pytest.raises(InvalidArgumentError, match='not created with max_rate or poll'):
         set_max_rate(plain, 1)
+
+
+@pytest.mark.parametrize('mode', ['guarded', 'unguarded'])
+def test_the_action_clients_feedback_max_rate_is_per_goal(ros, mode):
+    """Two goals of a client at ``feedback_max_rate=5``, beside a plain client's goal, each
+    published at 100 Hz for 1.5 s: each limited goal's callback gets at most one per 0.2 s (the
+    first at once), the plain one every message; the results come as without a limit."""
+    action = '/' + unique_name('fib_rate')
+    server = action_server(action, 0.01, env=guard.environment() if mode == 'guarded' else None)
+    try:
+        limited = ActionClient(ros.node, Fibonacci, action, feedback_max_rate=5)
+        plain = RclpyActionClient(ros.node, Fibonacci, action)
+        for client in (limited, plain):
+            assert client.wait_for_server(timeout_sec=20)
+            prove_feedback_path(ros.spin_until, client)
+        received: dict[str, list[int]] = {'a': [], 'b': [], 'plain': []}
+        handles = {name: send(ros, limited if name != 'plain' else plain, 150,
+                              feedback_callback=lambda m, r=seen: r.append(m.feedback.sequence[0]))
+                   for name, seen in received.items()}
+        for handle in handles.values():
+            assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
+        ros.spin_for(0.3)
+        assert len(received['plain']) == 150
+        for name in 'ab':
+            ks = received[name]
+            assert ks and ks == sorted(ks) and 5 <= len(ks) <= 1.5 * 5 + 1, (name, ks)
+    finally:
+        server.stop()
+
+
+def test_feedback_max_rate_must_be_above_0(ros):
+    for bad in (0, -2.0, math.inf, 'fast', True):
+        with pytest.raises(InvalidArgumentError, match=f'feedback_max_rate={bad!r}'):
+            ActionClient(ros.node, Fibonacci, '/' + unique_name('fib'), feedback_max_rate=bad)
+    assert not list(ros.node.clients)

@@ -65,3 +65,18 @@ def check_tutorial_log(log: str) -> None:
 
 def test_tutorial_client_runs_unchanged_but_for_the_import(tmp_path):
     check_tutorial_log(run_tutorial_client(tmp_path))
+
+
+def test_rate_example_runs(tmp_path):
+    """The README's rate-limited and polled subscriptions, on a 100 Hz publisher in its process."""
+    script = tmp_path / 'rate.py'
+    script.write_text(readme_example('rate'))
+    run = subprocess.run([sys.executable, str(script)], capture_output=True, text=True,
+                         timeout=60, cwd=tmp_path)
+    assert run.returncode == 0, run.stdout + run.stderr
+    lines = run.stdout.splitlines()
+    assert [line for line in lines if line.startswith('poll:')] == [
+        'poll: 0', 'poll: 1', 'poll: 2'], lines
+    # 3 s at max_rate=2: the first message at once, then one a 0.5 s
+    assert 5 <= sum(line.startswith('std_msgs.msg.Int32(') for line in lines) <= 7, lines
+    assert lines[-1] == 'filtered in reader', lines

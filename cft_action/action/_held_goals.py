@@ -170,23 +170,30 @@ class HeldGoals:
                            started: float) -> None:
         """``wait_for_server``'s wait for the proof that the server has the feedback reader.
 
-        Waits at most ``timeout`` seconds, and within ``timeout_sec`` from ``started`` (a
-        monotonic time), unless the proof came, holding is suspended, or the feedback writer is in
-        this process. The server's services can be in the graph before its feedback writer: that
-        is waited for first, within the same time. Call it without ``lock``.
+        The server's services can show in the graph before its feedback writer: that is waited
+        for first. Then, unless the writer is in this process, the proof is waited for at most
+        ``timeout`` seconds (where it does not come, that is the proof's timeout, as a held
+        goal's). Both within ``timeout_sec`` from ``started`` (a monotonic time); not at all if
+        the proof came before or holding is suspended. Call it without ``lock``.
         """
         with self._lock:
             if self._gate.is_confirmed(0) or self.suspended:
                 return
-        left = self._timeout
-        if timeout_sec is not None and timeout_sec >= 0:
-            left = min(left, max(0.0, timeout_sec - (time.monotonic() - started)))
-        deadline = time.monotonic() + left
-        while not writers.seen() and time.monotonic() < deadline:
+
+        def left() -> float:
+            if timeout_sec is None or timeout_sec < 0:
+                return self._timeout
+            return min(self._timeout, max(0.0, timeout_sec - (time.monotonic() - started)))
+
+        seen_by = time.monotonic() + left()
+        while not writers.seen() and time.monotonic() < seen_by:
             time.sleep(self._poll_period)
         if not writers.any():
             return
-        if not self.await_proof(deadline):
+        budget = left()
+        if budget >= self._timeout:  # one poll after the proof's own timeout (from its 1st poll)
+            budget += self._poll_period
+        if not self.await_proof(time.monotonic() + budget):
             self._logger.debug('wait_for_server: the server did not prove that it has the '
                                'feedback reader in time; the first goal will be held')
 

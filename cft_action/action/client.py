@@ -31,7 +31,7 @@ from unique_identifier_msgs.msg import UUID
 from cft_action import _rcl
 from cft_action.action._action_entities import ActionEntities
 from cft_action.action._feedback_filter import FeedbackFilter, FeedbackFilterState
-from cft_action.action._feedback_intake import FeedbackIntake, MORE_FEEDBACK
+from cft_action.action._feedback_intake import FeedbackIntake, MORE_FEEDBACK, feedback_period
 from cft_action.topics._filtered_reader import (filter_class_for, WRITER_FILTERING,
                                                 WRITER_FILTERING_ENV)
 from cft_action.action._finished_goals import FinishedGoals
@@ -114,39 +114,39 @@ class ActionClient(CompatActionClient):
     """ROS Action client whose feedback subscription receives only its own goals' feedback."""
 
     def __init__(self, node: Node, action_type: Any, action_name: str, *,
-                 feedback_filter: Optional[str] = None,
+                 feedback_filter: Optional[str] = None, writer_filtering: str = 'guarded',
                  enable_feedback_msg_optimization: Optional[bool] = None,
-                 writer_filtering: str = 'guarded', **kwargs: Any) -> None:
+                 feedback_max_rate: Optional[float] = None, **kwargs: Any) -> None:
         """
         Create an ActionClient.
 
-        Takes every argument of :class:`rclpy.action.ActionClient`, plus ``feedback_filter``.
-
+        Takes every argument of :class:`rclpy.action.ActionClient`, plus the filter's.
         :param node: The ROS node to add the action client to.
         :param action_type: Type of the action.
         :param action_name: Name of the action.
             Used as part of the underlying topic and service names.
         :param feedback_filter: ``'client'`` (default): on a random tag that starts the UUID of
-            every goal sent with a feedback callback, fixed for the client's life; ``'goals'``: on
-            the live goals' exact UUIDs, updated as goals come and go (an event at the server
-            each); ``'off'``: as plain rclpy. ``CFT_ACTION_FEEDBACK_FILTER`` overrides it. Where
-            the filter cannot be used, the client behaves as rclpy, logs why once, and says so in
-            :attr:`feedback_filter_state`.
+            every goal sent with a feedback callback; ``'goals'``: on the live goals' UUIDs (an
+            event at the server per change); ``'off'``: as rclpy. ``CFT_ACTION_FEEDBACK_FILTER``
+            overrides it. Where the filter cannot be used, the client behaves as rclpy, logs why
+            once, and says so in :attr:`feedback_filter_state`.
         :param enable_feedback_msg_optimization: rclpy 10's (Lyrical) name for its opt-in filter:
             ``True`` means ``'client'`` unless another mode is given, ``False`` means ``'off'``.
-        :param writer_filtering: ``'guarded'`` (default): the library's own filter class, which
-            only a server under ``cft-action guard`` evaluates (any other sends everything, and
-            this client's DDS reader drops others' feedback before Python); ``'any'``: DDS-SQL,
-            which every Fast DDS server evaluates, at a cost and exposed to Fast-DDS#4878
-            (docs/SAFETY.md). ``CFT_ACTION_WRITER_FILTERING`` overrides it.
+        :param writer_filtering: ``'guarded'`` (default): the library's filter class, which only
+            a server under ``cft-action guard`` evaluates (elsewhere this client's DDS reader drops
+            others' feedback); ``'any'``: DDS-SQL, which every Fast DDS server evaluates, at a
+            cost and exposed to Fast-DDS#4878 (docs/SAFETY.md). ``CFT_ACTION_WRITER_FILTERING``.
+        :param feedback_max_rate: At most this many feedback messages a second of each goal reach
+            its callback, the first after each period (decided in this client); None: all.
         :param kwargs: ``callback_group``, ``feedback_sub_qos_profile``, ``status_sub_qos_profile``
             as for rclpy; ``goal_``, ``result_`` and ``cancel_service_qos_profile`` too, which
             default to a depth of ``SERVICE_QUEUE_DEPTH`` (rclpy's: 10).
         :raises ValueError: if ``feedback_filter``, ``writer_filtering`` or their environment
-            variables name no known value, or ``enable_feedback_msg_optimization`` contradicts
-            ``feedback_filter``.
+            variables name no known value, ``enable_feedback_msg_optimization`` contradicts
+            ``feedback_filter``, or ``feedback_max_rate`` is not above 0.
         """
         mode = _resolve_mode(feedback_filter, enable_feedback_msg_optimization)
+        self._feedback_period = feedback_period(feedback_max_rate)
         self._cft_logger = PromptLogger(node.get_logger().get_child('cft_action'))
         self._filter = FeedbackFilter(
             self._cft_logger, mode,
@@ -206,7 +206,8 @@ class ActionClient(CompatActionClient):
             node, self.callback_group, lock, self._cft_feedback_callbacks, self._filter.release,
             grace=FINISHED_GOAL_GRACE, period=RELEASE_CHECK_PERIOD)
         self._intake = FeedbackIntake(self._entities, self._finished_goals, self._filter,
-                                      self._feedback_writers.gids, self.callback_group)
+                                      self._feedback_writers.gids, self.callback_group,
+                                      self._feedback_period)
 
     # --- public API -------------------------------------------------------------------------------
 
@@ -330,9 +331,9 @@ class ActionClient(CompatActionClient):
         return ready
 
     def _cft_take_data(self) -> dict:
-        """As rclpy's take_data, except that the result response and the feedback are taken with
-        their source timestamps, feedback published after its goal's result is dropped, and status
-        comes with only the entries that can change this client's goal handles."""
+        """As rclpy's take_data, with the result and feedback's source timestamps, feedback after
+        its goal's result (or over ``feedback_max_rate``) dropped, and status trimmed to the
+        entries that can change this client's goal handles."""
         result_ready, feedback_ready = self._cft_take_readiness()
         status_ready = self._status.takes_here and self._cft_claim_status()
         entities = self._entities if self._entities.takes_here else None
@@ -352,8 +353,7 @@ class ActionClient(CompatActionClient):
     async def execute(self, taken_data: dict) -> None:
         """Execute work after data has been taken from a ready wait set.
 
-        As rclpy's, with every feedback message taken in this wake; it also notes goals that
-        finished (rejected, or a terminal status), to release their callbacks and filter terms."""
+        As rclpy's, with every feedback message taken in this wake; notes finished goals."""
         goal_id = self._cft_goal_id_of_goal_request(taken_data.get('goal', (None,))[0])
         more = self._intake.more(taken_data)
         await super().execute(taken_data)
