@@ -16,7 +16,6 @@ the client: the first message taken after the period passes, the others go to no
 
 from __future__ import annotations
 
-import math
 import time
 from typing import Any, Callable, Iterable, Optional
 
@@ -25,7 +24,7 @@ from rclpy.callback_groups import CallbackGroup, MutuallyExclusiveCallbackGroup
 from cft_action.action._action_entities import ActionEntities
 from cft_action.action._feedback_filter import FeedbackFilter
 from cft_action.action._finished_goals import FinishedGoals
-from cft_action.errors import InvalidArgumentError
+from cft_action.topics.rate import check_max_rate
 
 __all__ = ['FEEDBACK_BATCH', 'FeedbackIntake', 'MORE_FEEDBACK', 'feedback_period']
 
@@ -45,13 +44,8 @@ def feedback_period(feedback_max_rate: Optional[float]) -> Optional[float]:
 
     :raises InvalidArgumentError: unless it is None or a finite number above 0.
     """
-    if feedback_max_rate is None:
-        return None
-    if (isinstance(feedback_max_rate, bool) or not isinstance(feedback_max_rate, (int, float))
-            or not math.isfinite(feedback_max_rate) or feedback_max_rate <= 0):
-        raise InvalidArgumentError(f'feedback_max_rate={feedback_max_rate!r}: give a rate in Hz '
-                                   'above 0, or None for no limit')
-    return 1.0 / feedback_max_rate
+    rate = check_max_rate(feedback_max_rate, 'feedback_max_rate')
+    return None if rate is None else 1.0 / rate
 
 
 class FeedbackIntake:

@@ -22,6 +22,7 @@ until it has arrived, a publisher applies the previous filter.
 
 from __future__ import annotations
 
+import inspect
 import math
 import threading
 import time
@@ -66,17 +67,17 @@ class RateFilterState(NamedTuple):
     layout_mismatches: int = 0
 
 
-def check_max_rate(max_rate: Optional[float]) -> Optional[float]:
-    """``max_rate`` as a float, or None.
+def check_max_rate(max_rate: Optional[float], name: str = 'max_rate') -> Optional[float]:
+    """``max_rate`` as a float, or None; ``name``: the argument's, for the error.
 
     :raises InvalidArgumentError: if it is not a positive, finite number.
     """
     if max_rate is None:
         return None
     if isinstance(max_rate, bool) or not isinstance(max_rate, (int, float)):
-        raise InvalidArgumentError(f'max_rate={max_rate!r}: expected a number of Hz, or None')
+        raise InvalidArgumentError(f'{name}={max_rate!r}: expected a number of Hz, or None')
     if not math.isfinite(max_rate) or max_rate <= 0:
-        raise InvalidArgumentError(f'max_rate={max_rate!r}: expected a positive, finite rate in Hz')
+        raise InvalidArgumentError(f'{name}={max_rate!r}: expected a positive, finite rate in Hz')
     return float(max_rate)
 
 
@@ -135,22 +136,34 @@ class RateFilter:
         with self._lock:
             self.max_rate = checked
 
-    def gate(self, callback: Callable[[Any], Any]) -> Callable[[Any], Any]:
+    def gate(self, callback: Callable[..., Any]) -> Callable[..., Any]:
         """``callback`` behind the same rule in Python, for a subscription the class cannot
         filter: it is applied to all publishers together, since rclpy's callbacks do not say
-        which publisher a message came from."""
-        def gated(message: Any) -> Any:
+        which publisher a message came from. It takes the message info where ``callback`` takes
+        it (rclpy's rule: a callback that cannot be called with the message alone)."""
+        def passes() -> bool:
             with self._lock:
                 now = time.monotonic()
                 if self.polling and self._remaining == 0:
-                    return None
+                    return False
                 if self.max_rate is not None and now < self._next_pass:
-                    return None
+                    return False
                 self._next_pass = now + 1.0 / self.max_rate if self.max_rate else 0.0
                 if self.polling:
                     self._remaining -= 1
-            return callback(message)
-        return gated
+            return True
+
+        def with_info(message: Any, info: Any) -> Any:
+            return callback(message, info) if passes() else None
+
+        def message_only(message: Any) -> Any:
+            return callback(message) if passes() else None
+
+        try:
+            inspect.signature(callback).bind(object())
+        except TypeError:
+            return with_info
+        return message_only
 
 
 #: The rate filters of the subscriptions made with ``max_rate`` or ``poll``.

@@ -212,11 +212,23 @@ def subscribe(session: Session, topic: str, msg_type, qos, callback: Callable[..
     """
     import rclpy
     from cft_action.topics.filters import dds_literals
+    from cft_action.errors import InvalidArgumentError
     from cft_action.topics.subscription import (ContentFilterError, create_filtered_subscription,
-                                         is_content_filter_supported)
+                                                is_content_filter_supported)
 
     # Fast DDS rejects an expression that starts or ends with a space, which a shell makes easy
     expression = None if args.content_filter is None else args.content_filter.strip()
+    rate = {'max_rate': args.max_rate, 'poll': getattr(args, 'poll', None)}
+    if rate['max_rate'] is not None or rate['poll'] is not None:
+        if expression is not None:
+            raise FilterUnavailable(
+                '--max-rate and --poll take no --content-filter: a subscription has one filter, '
+                'and the rate filter is not DDS-SQL')
+        try:
+            return create_filtered_subscription(session.node, msg_type, topic, callback, qos,
+                                                raw=raw, **rate)
+        except (ContentFilterError, InvalidArgumentError) as e:
+            raise FilterUnavailable(f'cannot rate-limit or poll {topic}: {e}') from None
     if expression is None:
         if args.content_filter_params:
             raise FilterUnavailable('--content-filter-params needs --content-filter')
@@ -480,6 +492,11 @@ def add_content_filter_arguments(parser: argparse.ArgumentParser) -> None:
         help='What to do when the rmw implementation cannot filter: none (default) exits with '
              'status 2; client evaluates the expression in this process, so every message '
              'crosses the network')
+    group.add_argument(
+        '--max-rate', metavar='HZ', type=positive_float, default=None,
+        help='At most HZ messages a second from each publisher, the first after each 1/HZ s: a '
+             'publisher under cft-action guard drops the others before they cross the network, '
+             "else this process's DDS reader does (not with --content-filter)")
 
 
 def add_python_filter_argument(parser: argparse.ArgumentParser, help_text: str) -> None:

@@ -37,7 +37,9 @@ EPILOG = examples(
     '--content-filter-params 30.0',
     'cft-action topic echo /diagnostics --content-filter "status[0].level >= 2" --once',
     'cft-action topic echo /odom --content-filter "pose.pose.position.x BETWEEN -1.0 AND 1.0" '
-    '--field pose.pose.position --csv')
+    '--field pose.pose.position --csv',
+    'cft-action topic echo /camera/info --poll 1',
+    'cft-action topic echo /odom --max-rate 2')
 
 DEFAULT_TRUNCATE_LENGTH = 128
 
@@ -93,6 +95,10 @@ def add_arguments(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         '--include-message-info', '-i', action='store_true',
         help='Shows the associated message info.')
+    parser.add_argument(
+        '--poll', metavar='N', type=topic_api.positive_int, default=None,
+        help='Print the next N messages of each publisher, then exit: the others are dropped by '
+             'the publisher under cft-action guard, else by this process\'s DDS reader')
 
 
 def _field_path(args: argparse.Namespace, parser: argparse.ArgumentParser) -> list[str]:
@@ -136,8 +142,11 @@ def main(args: argparse.Namespace, parser: argparse.ArgumentParser, prog: str) -
     def body(session: topic_api.Session) -> int:
         nonlocal keep
         keep = topic_api.python_filter(args.filter_expr)
-        _, deadline = topic_api.start(session, args, on_message, raw=args.raw)
+        topic, deadline = topic_api.start(session, args, on_message, raw=args.raw)
         while (count is None or printed < count) and not deadline.passed():
+            if args.poll is not None and printed >= args.poll * max(
+                    1, session.node.count_publishers(topic)):
+                break  # every publisher's N
             session.spin_once(deadline.remaining(0.1))
         return 0
 
