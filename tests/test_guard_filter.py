@@ -109,6 +109,7 @@ LAYOUT_PROBE = r'''
 #include <fastdds/rtps/builtin/data/ReaderProxyData.h>
 #include <fastdds/rtps/common/CacheChange.h>
 #include <fastdds/rtps/common/SerializedPayload.h>
+#include <fastdds/dds/topic/IContentFilter.hpp>
 #include <cstddef>
 #include <cstdio>
 #include <cstring>
@@ -137,7 +138,9 @@ int main() {
     if (word == 3 && at >= 4) length_at = at;
   }
   CacheChange_t change;  // public members: the offsets measured on an object
-  printf("%ld %ld %zu %zu %zu %zu %ld %zu %ld %zu %zu %ld %ld %ld %ld %zu %ld %zu %ld %ld %ld\n",
+  eprosima::fastdds::dds::IContentFilter::FilterSampleInfo info;
+  printf("%ld %ld %zu %zu %zu %zu %ld %zu %ld %zu %zu %ld %ld %ld %ld %zu %ld %zu %ld %ld %ld"
+         " %ld\n",
          diff(&rpd->typeName(), rpd), diff(&rpd->content_filter(), rpd),
          offsetof(ContentFilterProperty, related_topic_name),
          offsetof(ContentFilterProperty, filter_class_name),
@@ -148,7 +151,8 @@ int main() {
          diff(&change.kind, &change), sizeof change.kind, diff(&change.serializedPayload, &change),
          offsetof(SerializedPayload_t, max_size), diff(&change.writerGUID, &change),
          diff(&change.write_params.related_sample_identity().writer_guid(), &change),
-         diff(&change.write_params.related_sample_identity().sequence_number(), &change));
+         diff(&change.write_params.related_sample_identity().sequence_number(), &change),
+         diff(&info.sample_identity.writer_guid(), &info));
   return 0;
 }
 '''
@@ -159,7 +163,8 @@ LAYOUT_NAMES = ('RPD_TYPE_NAME', 'RPD_CONTENT_FILTER', 'CFP_RELATED_TOPIC', 'CFP
                 'CFP_EXPRESSION', 'CFP_PARAMETERS', 'RLV_VECTOR', 'STRING255_SIZE',
                 'STRING255_LENGTH', 'PAYLOAD_LENGTH', 'PAYLOAD_DATA', 'RPD_GUID', 'RPD_KEY',
                 'RPD_TOPIC_NAME', 'CC_KIND', 'CC_KIND_SIZE', 'CC_PAYLOAD', 'PAYLOAD_MAX_SIZE',
-                'CC_WRITER_GUID', 'CC_RELATED_WRITER_GUID', 'CC_RELATED_SEQUENCE')
+                'CC_WRITER_GUID', 'CC_RELATED_WRITER_GUID', 'CC_RELATED_SEQUENCE',
+                'FSI_WRITER_GUID')
 
 
 def guard_library() -> ctypes.CDLL:

@@ -69,7 +69,7 @@ CFT_EXPORT long cft_guard_filter_layout(int which) {
                                 STRING255_SIZE, STRING255_LENGTH, PAYLOAD_LENGTH, PAYLOAD_DATA,
                                 RPD_GUID, RPD_KEY, RPD_TOPIC_NAME, CC_KIND, CC_KIND_SIZE,
                                 CC_PAYLOAD, PAYLOAD_MAX_SIZE, CC_WRITER_GUID,
-                                CC_RELATED_WRITER_GUID, CC_RELATED_SEQUENCE};
+                                CC_RELATED_WRITER_GUID, CC_RELATED_SEQUENCE, FSI_WRITER_GUID};
   return which >= 0 && which < (int)(sizeof layout / sizeof layout[0]) ? layout[which] : -1;
 #else
   (void)which;
