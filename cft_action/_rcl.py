@@ -146,7 +146,8 @@ def _check_rcl_ret(ret: int, func: Any, args: tuple) -> int:
     if ret != RCL_RET_OK:
         name = _RET_NAMES.get(ret, str(ret))
         error = take_rcl_error()
-        raise ContentFilterError(f'{func.__name__} returned {name}: {error}',
+        raise ContentFilterError(f'{func.__name__} returned {name}: '
+                                 f'{error or "rcl set no error string"}',
                                  function=func.__name__, ret=ret, rcl_error=error)
     return ret
 
@@ -318,9 +319,10 @@ def set_content_filter(subscription_ptr: int, expression: str,
     if filter_class:
         reason = filter_class_status()
         if reason:
+            # Raised before rcl is called: there is no rcl error string, the reason is the part's.
             raise ContentFilterError(
-                f'the {filter_class} filter class cannot be used: {reason}',
-                function='cft_filter_class_install')
+                f'the {filter_class} filter class (built for Fast DDS 2.14 only) cannot be used: '
+                f'{reason}', function='cft_filter_class_install')
     encoded = [p.encode() for p in parameters]
     argv = (ctypes.c_char_p * max(1, len(encoded)))(*encoded)
     options = _lib.rcl_get_zero_initialized_subscription_content_filter_options()
@@ -374,7 +376,8 @@ def _install_part(install: Callable[[], int], error: Callable[[], Optional[bytes
     if 'fastrtps' not in get_rmw_implementation_identifier():
         return f'{get_rmw_implementation_identifier()} is not rmw_fastrtps'
     if install() < 0:
-        return (error() or b'').decode('utf-8', 'replace')
+        reason = (error() or b'').decode('utf-8', 'replace')
+        return reason or f'{getattr(install, "__name__", "install")} failed without a reason'
     return ''
 
 

@@ -5,9 +5,9 @@ from test_msgs.action import Fibonacci
 from rclpy.qos import QoSProfile
 from std_msgs.msg import Int32
 
-from cft_action import ActionClient, ContentFilterError, ContentFilterOptions
+from cft_action import _rcl, ActionClient, ContentFilterError, ContentFilterOptions
 from cft_action.topics import filters
-from cft_action.topics._filtered_reader import FilteredReader, ReaderFilterState
+from cft_action.topics._filtered_reader import FilteredReader, has_filter, ReaderFilterState
 from cft_action.action.goal_filter import MAX_EXPRESSION_BYTES
 from cft_action.topics.subscription import create_filtered_subscription
 from harness.ros import unique_name
@@ -58,6 +58,36 @@ def test_a_failed_update_abandons_the_filter_in_place_for_good(reader):
     assert reader.state == state, 'an abandoned filter never comes back'
     with pytest.raises(ContentFilterError, match='a filter update failed'):
         reader.change(ContentFilterOptions('data > 1', []))
+
+
+def test_a_filter_class_this_fast_dds_lacks_falls_back_naming_why(ros, monkeypatch):
+    # As on Kilted's wheels (Fast DDS 3): the class's part cannot load, so rcl is never called and
+    # there is no rcl error string; the reason is the part's own, never an empty one.
+    cause = 'not loaded: libfastrtps.so.2.14: cannot open shared object file'
+    monkeypatch.setattr(_rcl, 'filter_class_status', lambda: cause)
+    topic = '/' + unique_name('cft_core_class')
+    subscription = ros.node.create_subscription(Int32, topic, lambda _: None, 10)
+    core = FilteredReader(ros.node.get_logger(), unfiltered='test filter not used',
+                          match_all=MATCH_ALL, filter_class=_rcl.UUID_FILTER_CLASS)
+    with subscription.handle:
+        assert not core.install(subscription.handle, subscription.handle.pointer, topic, NEVER)
+        assert not has_filter(subscription.handle.pointer), 'the subscription was not touched'
+    assert core.state == ReaderFilterState(False, core.state.reason, '', (), 0)
+    assert core.state.reason == (
+        f'installing the filter failed: content filter {NEVER.filter_expression!r} with '
+        f'parameters [] on {topic} was not set: the {_rcl.UUID_FILTER_CLASS} filter class (built '
+        f'for Fast DDS 2.14 only) cannot be used: {cause}')
+
+
+def test_an_rcl_failure_without_an_error_string_still_says_what_failed(reader, monkeypatch):
+    taken = []
+    real = _rcl.take_rcl_error
+    monkeypatch.setattr(_rcl, 'take_rcl_error', lambda: (taken.append(real()), '')[1])
+    with pytest.raises(ContentFilterError, match=r'was rejected: rcl_subscription_set_content_'
+                       r'filter returned RCL_RET_\w+: rcl set no error string$'):
+        reader.change(ContentFilterOptions('no_such_field = 1', []))
+    assert taken, 'rcl failed, and its error state was reset'
+    assert reader.read() == NEVER
 
 
 def test_no_call_reaches_a_detached_reader(reader):

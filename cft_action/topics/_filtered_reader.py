@@ -92,8 +92,14 @@ def apply_filter(subscription_ptr: int, topic: str, expression: str,
             created = _rcl.set_content_filter(subscription_ptr, expression, parameters,
                                               filter_class=filter_class)
         except ContentFilterError as e:
-            raise ContentFilterError(f'{described} was rejected: {e.rcl_error}',
-                                     function=e.function, ret=e.ret, rcl_error=e.rcl_error) from e
+            # rcl's own error string when rcl refused it; else why the library did not call rcl
+            # (e.g. a filter class that this Fast DDS cannot have), which has no rcl error string.
+            if e.ret is not None:
+                reason = f'was rejected: {e.rcl_error or e}'
+            else:
+                reason = f'was not set: {e}'
+            raise ContentFilterError(f'{described} {reason}', function=e.function, ret=e.ret,
+                                     rcl_error=e.rcl_error) from e
         if not _rcl.is_cft_enabled(subscription_ptr):
             raise ContentFilterError(f'{described} was accepted but is not applied by '
                                      f'{rclpy.get_rmw_implementation_identifier()}')
