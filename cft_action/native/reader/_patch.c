@@ -138,13 +138,13 @@ void *cft_resolve(struct cft_install *once, const char *soname, const char *cons
                   size_t count, void **found, int *status) {
   void *library = dlopen(soname, RTLD_NOW | RTLD_NOLOAD);
   if (library == NULL) {
-    *status = cft_install_fail(once, -1, "not loaded:", dlerror());
+    *status = cft_install_fail(once, -1, "not loaded", dlerror());
     return NULL;
   }
   for (size_t i = 0; i < count; i++) {
     found[i] = dlsym(library, names[i]);
     if (found[i] == NULL) {
-      *status = cft_install_fail(once, -2, "not found:", dlerror());
+      *status = cft_install_fail(once, -2, "not found", dlerror());
       return NULL;
     }
   }

@@ -162,7 +162,7 @@ static bool register_reader(void *self, void *reader, const void *topic, const v
 
 static int install(struct cft_install *once) {
 #if !CFT_LAYOUT_KNOWN
-  return cft_install_fail(once, -5, "no Fast DDS layout at build time:", CFT_LAYOUT_SOURCE);
+  return cft_install_fail(once, -5, "no Fast DDS layout at build time", CFT_LAYOUT_SOURCE);
 #else
   static const char *const names[] = {REGISTER_READER};
   void *resolved[1];
