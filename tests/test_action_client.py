@@ -20,7 +20,6 @@ from unique_identifier_msgs.msg import UUID
 import cft_action._rcl
 import cft_action.action.client
 from cft_action import ActionClient, guard
-from cft_action.action.client import FINISHED_GOAL_GRACE
 from cft_action.topics.filters import NEVER_MATCH
 from harness.polling import wait_until
 from harness.ros import RosSession, unique_name
@@ -329,9 +328,19 @@ def test_goal_without_feedback_callback_receives_no_feedback(ros, server):
     assert client.feedback_filter_state.feedback_taken == taken
 
 
+SHORT_GRACE = 1.0
+
+
+def short_grace(monkeypatch):
+    """Finished goals released after 1 s, not FINISHED_GOAL_GRACE: a test of the release itself."""
+    monkeypatch.setattr(cft_action.action.client, 'FINISHED_GOAL_GRACE', SHORT_GRACE)
+    monkeypatch.setattr(cft_action.action.client, 'RELEASE_CHECK_PERIOD', 0.2)
+
+
 @pytest.mark.parametrize('mode', ['client', 'goals'])
-def test_cancel_and_reject_behave_as_rclpy_and_release_callbacks(ros, server, mode):
+def test_cancel_and_reject_behave_as_rclpy_and_release_callbacks(ros, server, mode, monkeypatch):
     action, _ = server
+    short_grace(monkeypatch)
     client = make_client(ros, action, feedback_filter=mode)
     received = []
     rejected = send(ros, client, -1, feedback_callback=received.append)
@@ -344,22 +353,23 @@ def test_cancel_and_reject_behave_as_rclpy_and_release_callbacks(ros, server, mo
     assert len(cancel.result().goals_canceling) == 1
     assert result_of(ros, handle).status == GoalStatus.STATUS_CANCELED
     # nobody asked for the rejected goal's result: its callback is released all the same
-    assert ros.spin_until(lambda: not client._feedback_callbacks, FINISHED_GOAL_GRACE + 15)
+    assert ros.spin_until(lambda: not client._feedback_callbacks, SHORT_GRACE + 15)
     state = client.feedback_filter_state
     assert state.live_goals == 0
     if mode == 'goals':
         assert ros.spin_until(lambda: client.feedback_filter_state.live_goals == 0, 5)
 
 
-def test_finished_goals_are_released_without_asking_for_results(ros, server):
+def test_finished_goals_are_released_without_asking_for_results(ros, server, monkeypatch):
     """rclpy keeps feedback callbacks until the result is requested; finished goals leak there."""
     action, _ = server
+    short_grace(monkeypatch)
     client = make_client(ros, action, feedback_filter='goals')
     handles = [send(ros, client, 2, feedback_callback=lambda m: None) for _ in range(20)]
     assert all(h.accepted for h in handles)
     assert ros.spin_until(lambda: all(h.status == GoalStatus.STATUS_SUCCEEDED for h in handles),
                           15)
-    assert ros.spin_until(lambda: not client._feedback_callbacks, FINISHED_GOAL_GRACE + 15)
+    assert ros.spin_until(lambda: not client._feedback_callbacks, SHORT_GRACE + 15)
     assert ros.spin_until(lambda: client.feedback_filter_state.live_goals == 0, 5)
     state = client.feedback_filter_state
     assert state.active and state.updates <= 3

@@ -24,8 +24,8 @@ CONFIGS = ('rclpy', 'client', 'goals')
 @pytest.fixture(scope='module')
 def report(tmp_path_factory):
     out = tmp_path_factory.mktemp('differential') / 'report.json'
-    command = [sys.executable, '-m', 'benchmarks.differential', '--duration', '3', '--slots', '3',
-               '--seed', '12', '--linger', '2', '--domain', os.environ['ROS_DOMAIN_ID'],
+    command = [sys.executable, '-m', 'benchmarks.differential', '--duration', '2', '--slots', '2',
+               '--seed', '12', '--linger', '1', '--domain', os.environ['ROS_DOMAIN_ID'],
                '--out', str(out), '--markdown']
     run = subprocess.run(command, cwd=ROOT, capture_output=True, text=True, timeout=150)
     assert run.returncode == 0, run.stdout[-3000:] + run.stderr[-3000:]

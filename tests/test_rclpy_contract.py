@@ -116,7 +116,7 @@ def test_wait_for_server_finds_a_server(ros, server, mode):
 def test_goal_to_no_server_stays_unanswered(ros, mode):
     client = ActionClient(ros.node, Fibonacci, '/' + unique_name('absent'), feedback_filter=mode)
     future = client.send_goal_async(Fibonacci.Goal())
-    ros.spin_for(2.0)
+    ros.spin_for(1.0)
     assert not future.done()
 
 
@@ -188,7 +188,7 @@ def test_feedback_published_after_the_result_is_not_delivered(ros, mode):
     """rclpy forgets the callback when the result arrives. This client keeps it a while longer,
     for feedback published before the result, and drops what the server published after it."""
     action = '/' + unique_name('fib')
-    late_s = 2.0
+    late_s = 1.0
     child = action_server(action, PERIOD, env=guard.environment(), late_feedback=late_s)
     try:
         client = ActionClient(ros.node, Fibonacci, action, feedback_filter=mode)
