@@ -66,7 +66,9 @@ def fastdds_include_dirs() -> list[Path]:
             # fastcdr and foonathan_memory: beside it (wheels), in their own folders (apt), or in a
             # later candidate (CFT_FASTDDS_INCLUDE=<stack headers>:<venv>/include).
             root = include.parent if include.name == 'fastrtps' else include
-            near = [root / 'fastcdr', root / 'foonathan_memory', root]
+            # rmw and rcutils: rmw's service structures, for the guard (_fastdds_layout.cpp).
+            near = [root / 'fastcdr', root / 'foonathan_memory', root / 'rmw', root / 'rcutils',
+                    root]
             return list(dict.fromkeys([include] + [d for d in near + candidates if d.is_dir()]))
     return []
 

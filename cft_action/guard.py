@@ -37,8 +37,8 @@ from cft_action._native import extension_path, GUARD_LIBRARY
 from cft_action.errors import CftActionError
 
 __all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts',
-           'filter_counts', 'layout', 'writer_limits', 'reply_counts', 'environment',
-           'READER_FILTERS_ENV', 'REPLIES_ENV']
+           'filter_counts', 'layout', 'writer_limits', 'reply_counts', 'status_counts',
+           'environment', 'READER_FILTERS_ENV', 'REPLIES_ENV', 'STATUS_ENV']
 
 #: Environment variable with the number of filtered readers that each writer of a guarded process
 #: filters for (1 to 4063; default 1024; Fast DDS's own limit is 32).
@@ -274,6 +274,36 @@ def reply_counts() -> dict[str, int]:
     An empty dict when the guard is not preloaded.
     """
     return _counters('cft_guard_reply_count', REPLY_COUNTERS)
+
+
+#: The counters of cft_guard_status_count() in _guard_status.c, in its order.
+STATUS_COUNTERS = ('requests', 'implausible', 'verdicts', 'changed', 'owed', 'withheld',
+                   'unknown', 'malformed', 'resets')
+
+#: Environment variable that turns the status filter off (``off`` or ``0``).
+STATUS_ENV = 'CFT_GUARD_STATUS'
+
+
+def status_counts() -> dict[str, int]:
+    """Return what the guard did with this process's action status samples.
+
+    An action server's status writer sends every status sample, which lists every goal, to every
+    client. The guard sends a sample to a client of this library only when it changes the status of
+    a goal that the client's participant requested, or when the client had been passed the sample
+    before it and had not acknowledged it when it was replaced (cft_action/native/guard/
+    _guard_status.c). Plain clients get every sample. ``CFT_GUARD_STATUS=off`` turns it off. Keys:
+
+    - ``requests``: goal requests taken, recorded with the participant that sent them;
+    - ``implausible``: goal requests whose header did not name a user endpoint (not recorded);
+    - ``verdicts``: verdicts for the clients' status readers; of those, ``changed`` passed a
+      sample that changes one of the reader's goals, ``owed`` one owed to it, ``withheld`` none;
+    - ``unknown``: entries of goals whose requester was not recorded (they go to every reader);
+    - ``malformed``: samples that did not read as a GoalStatusArray (passed);
+    - ``resets``: times the record of requesters was full (32,768 goals) and started anew.
+
+    An empty dict when the guard is not preloaded.
+    """
+    return _counters('cft_guard_status_count', STATUS_COUNTERS)
 
 
 def environment(env: Optional[Mapping[str, str]] = None) -> dict[str, str]:

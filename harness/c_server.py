@@ -58,7 +58,8 @@ GUARD_CALLS = ('perform_create_new_change', 'process_reader_filter_info', 'remov
 GUARD_FAMILIES = {'guard_calls': GUARD_CALLS, 'guard_filter': guard.FILTER_COUNTERS,
                   'guard_filter_class': guard.FILTER_CLASS_COUNTERS,
                   'guard_writers': guard.WRITER_QOS_COUNTERS,
-                  'guard_heartbeats': guard.HEARTBEAT_COUNTERS}
+                  'guard_heartbeats': guard.HEARTBEAT_COUNTERS,
+                  'guard_status': guard.STATUS_COUNTERS}
 
 
 class CServerUnavailable(RuntimeError):

@@ -56,7 +56,8 @@ replies to ``readers``: with ``--record-readers``, per goal UUID in hex, the GID
 feedback readers in this server's graph when it took the goal's request (a graph query per goal,
 2 ms with 40 readers: off by default, so as not to load the server that other benchmarks
 measure); ``READERS_NOW <json>`` to ``readers now``, those in its graph now. The command
-``release`` ends ``--hold-goals``. End of input stops the server.
+``release`` ends ``--hold-goals``; ``hold`` holds the goals that start from then on until the
+next ``release``, as ``--hold-goals`` does. End of input stops the server.
 """
 
 from __future__ import annotations
@@ -300,6 +301,13 @@ class TickingServer:
             goal_handle.succeed()
         return Fibonacci.Result(sequence=array.array('i', [entry[1]] + [0] * self.result_pad))
 
+    def hold(self) -> None:
+        """Hold the goals that start from now on until :meth:`release` (the ``hold`` command)."""
+        with self.lock:
+            self.hold_goals = 2**62
+            self.released_at = None
+            self.release_reason = ''
+
     def release(self, reason: str) -> None:
         """Let the held goals go on (``--hold-goals``); the first call counts."""
         with self.lock:
@@ -378,7 +386,8 @@ class TickingServer:
                     'guard_filter': guard.filter_counts(), 'guard_writers': guard.writer_limits(),
                     'guard_filter_class': guard.filter_class_counts(),
                     'guard_heartbeats': guard.heartbeat_counts(),
-                    'guard_replies': guard.reply_counts()}
+                    'guard_replies': guard.reply_counts(),
+                    'guard_status': guard.status_counts()}
 
 
 def parse_args(argv: list[str]) -> argparse.Namespace:
@@ -457,6 +466,8 @@ def main(argv: list[str]) -> None:
             report()
         elif line.strip() == 'release':
             server.release('command')
+        elif line.strip() == 'hold':
+            server.hold()
         elif line.strip() == 'goals':
             with server.lock:
                 counts = json.dumps(server.published_per_goal)

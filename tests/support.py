@@ -42,7 +42,7 @@ def helper_process(module: str, args: Sequence[object] = (), *, env: Optional[di
 def action_server(action: str, period: float, *, env: Optional[dict] = None,
                   late_feedback: float = 0.0, mute_cancel: bool = False,
                   feedback_depth: Optional[int] = None, result_pad: int = 0,
-                  timeout: float = 30.0) -> Proc:
+                  hold_goals: int = 0, timeout: float = 30.0) -> Proc:
     """The project's Fibonacci action server (:mod:`harness.server`) with keep-all queues.
 
     rclpy's default depth of 10 drops requests when many clients send goals at once (measured:
@@ -50,13 +50,15 @@ def action_server(action: str, period: float, *, env: Optional[dict] = None,
     machine lags: these tests are about filtering, so every queue keeps all. ``late_feedback``
     and ``mute_cancel``: see the server's ``--late-feedback`` and ``--mute-cancel``;
     ``feedback_depth``: the feedback writer alone keeps that many (``--feedback-depth``);
-    ``result_pad``: int32 elements appended to each result (``--result-pad``).
+    ``result_pad``: int32 elements appended to each result (``--result-pad``); ``hold_goals``:
+    see ``--hold-goals``.
     """
     argv = python_module('harness.server', action, period, '--depth', 'all',
                          '--late-feedback', late_feedback,
                          *(['--mute-cancel'] if mute_cancel else []),
                          *(['--feedback-depth', feedback_depth] if feedback_depth else []),
-                         *(['--result-pad', result_pad] if result_pad else []))
+                         *(['--result-pad', result_pad] if result_pad else []),
+                         *(['--hold-goals', hold_goals] if hold_goals else []))
     return _started(Proc('server', argv, env or os.environ.copy()), 'READY', timeout)
 
 
@@ -305,13 +307,15 @@ class WireRun(NamedTuple):
 def clients_on_the_wire(clients: Sequence[Sequence[object]], capture: Callable[..., dict],
                         writers: Sequence[str] = ('feedback',), *, guarded: bool = True,
                         server_env: Optional[dict] = None, feedback_depth: Optional[int] = None,
-                        result_pad: int = 0, together: bool = False) -> WireRun:
+                        result_pad: int = 0, together: bool = False,
+                        release_after: Optional[float] = None) -> WireRun:
     """Run a server (guarded or not) and one client process (tests/helpers/fib_client.py) per
     entry of ``clients`` (its arguments after the action: mode, goals, order[, writer_filtering]),
     all on UDP only; capture on loopback with ``capture(interface, {writer GUIDs}, stop,
     listening)`` (from :mod:`harness.capture`, root only) the traffic of the server's ``writers``
     (names of harness.server's STATS ``writers``) while the clients' goals run. ``together``
-    starts the clients at once instead of one after another."""
+    starts the clients at once instead of one after another. ``release_after``: the server holds
+    every goal of ``go`` after its first feedback until that many seconds after it."""
     env = {**os.environ, **UDP_ONLY}
     action = '/' + unique_name('cft_wire')
     server_environment = {**env, **(server_env or {})}
@@ -337,8 +341,13 @@ def clients_on_the_wire(clients: Sequence[Sequence[object]], capture: Callable[.
         sniffer.start()
         assert listening.wait(10)
         at_go = server.request_json('stats', 'STATS')
+        if release_after is not None:
+            server.send('hold')
         for process in processes:
             process.send('go')
+        if release_after is not None:
+            time.sleep(release_after)
+            server.send('release')
         reports = [json.loads(process.expect('RESULT', timeout=90).split(' ', 1)[1])
                    for process in processes]
         after = server.request_json('stats', 'STATS')

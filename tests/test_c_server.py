@@ -132,7 +132,12 @@ def test_writer_filtering_is_exact_under_concurrent_publishing(procs) -> None:
         assert p['callbacks'] == goals * order and p['goals_done'] == goals, p
     verdicts = {k: after['guard_filter'][k] - before['guard_filter'][k]
                 for k in after['guard_filter']}
-    assert after['guard_filter']['kept'] == 4 and after['guard_filter']['left'] == 0, after
+    # Each filtered client's feedback and status readers, on each server: kept by the guard.
+    assert after['guard_filter']['kept'] == 8 and after['guard_filter']['left'] == 0, after
+    # rcl_action's goal requests, taken through rmw_take_request: each one's requester recorded.
+    status = after['guard_status']
+    assert status['requests'] >= 2 * 2 * goals and status['implausible'] == 0, status
+    assert status['verdicts'] > 0 and status['unknown'] == status['malformed'] == 0, status
     assert verdicts['relevance_verdicts'] >= 2 * 2 * per_server, verdicts
     assert after['guard_filter']['mismatches'] == 0, after
     assert server.stop() == 0, server.tail()

@@ -30,6 +30,9 @@
 #define CFT_UUID_CLASS "CFT_ACTION_UUID"
 #define CFT_NODE_CLASS "CFT_ACTION_NODE"
 #define CFT_RATE_CLASS "CFT_ACTION_RATE"
+// An action client's status reader's: answered by native/reader/_status_trim.c in the client's
+// process, and by native/guard/_guard_status.c in a guarded server's, each its own way.
+#define CFT_STATUS_CLASS "CFT_ACTION_STATUS"
 
 // What a writer that filters for these classes (a writer of a guarded process) adds to its
 // USER_DATA, after rmw's "typehash=...;" (a key=value; pair, which rmw's parser skips): the

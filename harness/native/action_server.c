@@ -197,7 +197,8 @@ static void put_guard(buf_t *b) {
       {"guard_filter", "cft_guard_filter_count"},
       {"guard_filter_class", "cft_guard_filter_class_count"},
       {"guard_writers", "cft_guard_writer_qos_count"},
-      {"guard_heartbeats", "cft_guard_heartbeat_count"}};
+      {"guard_heartbeats", "cft_guard_heartbeat_count"},
+      {"guard_status", "cft_guard_status_count"}};
   for (size_t f = 0; f < sizeof families / sizeof families[0]; f++) {
     unsigned long (*count)(int) = (unsigned long (*)(int))dlsym(RTLD_DEFAULT, families[f][1]);
     put(b, ",\"%s\":[", families[f][0]);

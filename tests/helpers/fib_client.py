@@ -10,7 +10,8 @@ feedback messages each, waits for their results, and prints ``RESULT <json>``; i
 ``dropped`` count from the client's creation, ``proof_taken`` is what the proof took of them;
 ``reader_verdicts`` counts from the creation too, ``proof_verdicts`` is the proof's share;
 ``responses_dropped`` and ``responses_passed``, from the creation, are the response filter's
-(other participants' goal, cancel and result replies dropped by its readers, and its own).
+(other participants' goal, cancel and result replies dropped by its readers, and its own);
+``stale_handles`` counts the goal handles that the status topic left short of SUCCEEDED.
 """
 
 import json
@@ -19,6 +20,7 @@ import time
 import uuid
 
 import rclpy
+from action_msgs.msg import GoalStatus
 from rclpy.node import Node
 from rclpy.qos import HistoryPolicy, QoSProfile, ReliabilityPolicy
 from test_msgs.action import Fibonacci
@@ -66,14 +68,19 @@ def main() -> None:
             received[goal_uuid].append(msg.feedback.sequence[0])
         return on_feedback
 
-    results = []
+    results, handles = [], []
+
+    def on_response(future):
+        handles.append(future.result())
+        results.append(future.result().get_result_async())
+
     for _ in range(goals):
         goal_uuid = client.new_goal_uuid()
         key = bytes(goal_uuid.uuid)
         received[key] = []
         future = client.send_goal_async(Fibonacci.Goal(order=order), callback_for(key),
                                         goal_uuid=goal_uuid)
-        future.add_done_callback(lambda f: results.append(f.result().get_result_async()))
+        future.add_done_callback(on_response)
         rclpy.spin_once(node, timeout_sec=0)  # a backlog past the queue depths would drop data
     deadline = time.monotonic() + 60
     while time.monotonic() < deadline and not (
@@ -93,6 +100,8 @@ def main() -> None:
         'own_received': sum(len(ks) for ks in received.values()),
         'misrouted': misrouted,
         'results': sum(r.done() for r in results),
+        # goal handles whose status the status topic did not bring to SUCCEEDED
+        'stale_handles': sum(h.status != GoalStatus.STATUS_SUCCEEDED for h in handles),
         # goal index (in sending order) -> the feedback it got, for the first incomplete goals
         'incomplete': repr({i: ks for i, ks in enumerate(received.values())
                             if ks != list(range(order))})[:400],

@@ -43,6 +43,7 @@
 #include "_guard_filter.h"
 #include "_guard_log.h"
 #include "_guard_replies.h"
+#include "_guard_status.h"
 
 // ---- public state codes (mirrored in cft_action/guard.py) ---------------------------------------
 #define CFT_GUARD_ARMED 0        // preloaded; no Fast DDS resolved yet (none loaded, or not used)
@@ -353,6 +354,17 @@ static void restore_filtering_writer(const void **saved) { cft_filtering_writer 
       cft_filtering_writer;                                                                     \
   cft_filtering_writer = (writer)
 
+// Opens _guard_status.c's frame of the write for the enclosing block (`open`: the family has it),
+// and closes it however the block is left.
+static void close_status_frame(struct cft_status_frame **frame) {
+  if (*frame != NULL) cft_status_frame_close(*frame);
+}
+#define STATUS_FRAME_IN_SCOPE(open)                                                              \
+  struct cft_status_frame status_frame_;                                                         \
+  struct cft_status_frame *status_frame_open_ __attribute__((cleanup(close_status_frame))) =    \
+      (open) ? &status_frame_ : NULL;                                                            \
+  if (status_frame_open_ != NULL) cft_status_frame_open(status_frame_open_)
+
 // Opens _guard_filter.c's claim on a reader of the library's classes for the enclosing block (the
 // real process_reader_filter_info), and closes it however the block is left.
 static void close_claim(bool *open) {
@@ -378,6 +390,7 @@ static void close_claim(bool *open) {
     if (f->state != CFT_GUARD_ACTIVE) return real(self, kind, data, params, handle);            \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
     FILTERING_WRITER_IN_SCOPE(FILTERS && scoped_lock_ != NULL ? self : NULL);                   \
+    STATUS_FRAME_IN_SCOPE(FILTERS);                                                             \
     return real(self, kind, data, params, handle);                                              \
   }                                                                                             \
   void cft_prfi##SUFFIX(void *self, const void *guid, const void *info) {                       \
@@ -462,10 +475,11 @@ static const struct cft_filter_class_owner guard_owner = {guard_may_create, guar
 CFT_EXPORT void *cft_find2(void *self, const char *class_name) __asm__(FIND2);
 void *cft_find2(void *self, const char *class_name) {
   struct family *f = ready(0);
+  // A writer asking for the class of a reader that _guard_filter.c keeps (one of the library's
+  // classes, or the status class of _guard_status.c, which no factory here answers): no factory,
+  // so that Fast DDS keeps no filter, and no signature, for it.
+  if (f->state == CFT_GUARD_ACTIVE && cft_filter_claimed(class_name)) return NULL;
   void *ours = cft_filter_factory_for(class_name, &guard_owner);
-  // A writer asking for the class of a reader that _guard_filter.c keeps: no factory, so that Fast
-  // DDS keeps no filter, and no signature, for it.
-  if (ours != NULL && f->state == CFT_GUARD_ACTIVE && cft_filter_claimed(class_name)) return NULL;
   if (ours != NULL && f->state == CFT_GUARD_ACTIVE) {
     __atomic_fetch_add(&filter_class_lookups, 1, __ATOMIC_RELAXED);
     return ours;

@@ -47,6 +47,7 @@
 #include "_guard_filter.h"
 #include "_filter_class.h"
 #include "_guard_log.h"
+#include "_guard_status.h"
 #include "_uuid_program.h"
 
 __thread const void *cft_filtering_writer;
@@ -492,6 +493,14 @@ struct claim {
 };
 static __thread struct claim claim;
 
+// The grammar of a class whose readers the guard keeps: the stateless library classes', and the
+// status class's (_guard_status.c); NULL for any other.
+static const struct cft_filter_grammar *claim_grammar(const char *class_name) {
+  if (class_name != NULL && strcmp(class_name, CFT_STATUS_CLASS) == 0)
+    return &cft_guard_status_grammar;
+  return cft_filter_class_grammar(class_name);
+}
+
 static void say_once(bool *said, const char *what) {
   if (!__atomic_exchange_n(said, true, __ATOMIC_RELAXED)) cft_say("%s", what);
 }
@@ -511,8 +520,10 @@ bool cft_filter_claim_begin(const void *writer, const void *reader_guid, const v
   struct reader_filter f;
   bool filtered = false;
   if (!read_reader_filter(reader_info, reader_guid, &f, &filtered)) return false;
-  const struct cft_filter_grammar *grammar = cft_filter_class_grammar(f.class_name);
+  const struct cft_filter_grammar *grammar = claim_grammar(f.class_name);
   if (grammar == NULL) return false;
+  // The status class, only for an action's status reader (_guard_status.c).
+  if (grammar == &cft_guard_status_grammar && !cft_status_keeps(f.related, f.type)) return false;
   // An expression outside the class's grammar: its factory refuses it too, and Fast DDS keeps no
   // filter for the reader, which then receives every sample.
   void *program = cft_filter_grammar_compile(grammar, f.expression);
@@ -531,7 +542,7 @@ bool cft_filter_claim_begin(const void *writer, const void *reader_guid, const v
 }
 
 bool cft_filter_claimed(const char *class_name) {
-  if (!claim.open || claim.asked || cft_filter_class_grammar(class_name) != claim.grammar) return false;
+  if (!claim.open || claim.asked || claim_grammar(class_name) != claim.grammar) return false;
   claim.asked = true;
   return true;
 }
@@ -549,6 +560,7 @@ static bool settle_claim(const void *writer, const void *reader_guid) {
   if (claim.asked) {
     store_locked(writer, reader_guid, claim.program, claim.grammar);
     claim.program = NULL;
+    if (claim.grammar == &cft_guard_status_grammar) cft_status_reader_kept();
   } else {
     struct entry *e = find_locked(writer, reader_guid);
     if (e != NULL) clear_locked(e);
@@ -611,7 +623,9 @@ int cft_filter_relevance(const void *writer, const void *change, const void *rea
   int verdict = -1;
   pthread_mutex_lock(&table_lock);
   struct entry *e = find_locked(writer, reader_guid);
-  if (e != NULL && e->kept != NULL)
+  if (e != NULL && e->kept == &cft_guard_status_grammar)
+    verdict = cft_status_verdict(&e->program, c + CC_PAYLOAD, reader_guid);
+  else if (e != NULL && e->kept != NULL)
     verdict = cft_filter_grammar_matches(e->kept, e->program, c + CC_PAYLOAD);
   pthread_mutex_unlock(&table_lock);
   if (verdict >= 0) count(C_RELEVANCE);

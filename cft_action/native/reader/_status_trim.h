@@ -8,9 +8,9 @@
 
 // A client's status reader drops, in its receive thread, every sample that can change none of the
 // client's goal handles, by the status table that the expression `cft_status_table = <number>`
-// names (_status_trim.c). Only a client's own readers know the class.
-#define CFT_STATUS_CLASS "CFT_ACTION_STATUS"
-
+// names (_status_trim.c). In a client's process only its own readers know the class
+// (CFT_STATUS_CLASS); the guard answers it for a server's status writers otherwise
+// (native/guard/_guard_status.c).
 extern const struct cft_filter_grammar cft_status_grammar;
 
 #endif  // CFT_ACTION_STATUS_TRIM_H_

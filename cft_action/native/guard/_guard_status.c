@@ -1,0 +1,458 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The server guard's sixth part: an action's status samples go to each of the library's clients
+// only when they change the status of a goal its participant requested, or when it is owed one.
+//
+// An action server's status writer (`rt/<action>/_action/status`, reliable, transient local,
+// keep-last 1) publishes a GoalStatusArray that lists every goal the server holds, at every
+// transition of any goal, to every client. The library's clients give their status reader a
+// filter of CFT_STATUS_CLASS (native/reader/_status_trim.c answers it in the client). Here, in the
+// server, _guard_filter.c keeps such a reader out of Fast DDS's filter collection (no signature
+// is written for it) and asks cft_status_verdict where the RTPS writer asks whether a change is
+// relevant for the reader (DataWriterImpl::is_relevant, once per change and reader of a reliable
+// writer, in the write).
+//
+// Whose goal is it. The server takes each goal request through rmw_take_request (rcl_action's
+// rcl_action_take_goal_request -> rcl_take_request), which is interposed here: for a service whose
+// name ends in `/_action/send_goal`, the request's first member is its goal_id (the C and the C++
+// type support both put the UUID's 16 bytes first), and the request header's writer GUID names
+// the client's participant (its first 12 bytes, the GUID prefix, are every endpoint's of that
+// participant). The layouts of rmw_service_t and rmw_service_info_t come from rmw's headers
+// (_fastdds_layout.cpp); without them the filter is off. A status entry goes to a reader if its
+// goal's requester has the reader's GUID prefix, or is not known (a goal taken before the record
+// was cleared, see below): so no goal of a client is ever hidden from it.
+//
+// When a sample passes. The reader's record holds the status of each of its goals in the last
+// sample it was passed. A sample passes if it lists one of the reader's goals with another status
+// than the record, or one the record lacks; then the record becomes that sample's. A sample lists
+// every goal the server holds, so the newest sample passed carries the latest status of each of
+// the reader's goals. A new reader starts with an empty record; Fast DDS has already given it the
+// history's sample when it matched (ReaderProxy::rtps_is_relevant in matched_reader_add, before
+// the writer knows the reader's filter).
+//
+// Owed samples. With keep-last 1, writing a sample removes the previous one from the history
+// (DataWriterHistory::prepare_change -> remove_min_change -> StatefulWriter::change_removed_by_
+// history -> ReaderProxy::change_has_been_removed, per reader) before the new change's relevance is
+// asked (notify_writer -> unsent_change_added_to_history -> ReaderProxy::rtps_is_relevant ->
+// DataWriterImpl::is_relevant), in the same call, on the writing thread, with the writer's mutex
+// held throughout (Fast DDS 2.14.5 and 2.14.6). A reader that had been passed the removed change
+// and had not acknowledged it (ReaderProxy::change_is_acked is false before the real
+// change_has_been_removed: its list holds only changes passed to it and not acknowledged) gets no
+// GAP for it, and would miss that transition. So change_has_been_removed is interposed: inside a
+// write (a frame, opened by _guard.c's perform_create_new_change wrapper) it records such readers'
+// ReaderProxy objects, and rtps_is_relevant (interposed too) says which ReaderProxy asks; a change
+// is relevant for an owed reader whatever its content. A chain of owed samples ends at the first
+// one the reader acknowledges before the next write. The ReaderProxy pointers are compared within
+// one write only, under the writer's mutex, so a pooled ReaderProxy reused for another reader
+// never meets a stale pointer.
+//
+// The requesters' record holds REQUESTER_SLOTS / 2 goals; when it is full it is cleared, and the
+// goals taken before then count as anyone's (every kept reader is passed their changes) until the
+// server forgets them. A kept reader's record grows with its own goals only.
+//
+// Soundness rules:
+// - Only where _guard.c locks the Fast DDS 2.14 it knows, with its layouts and rmw's from headers.
+// - Only a reader of `rt/.../_action/status` of type action_msgs::msg::dds_::GoalStatusArray_.
+// - A sample that does not read as plain CDR GoalStatusArray passes, and empties the record.
+// - The interposed Fast DDS members always call the real ones, found in the library that called
+//   them; rmw_take_request calls the next definition after the guard's.
+// - CFT_GUARD_STATUS=off (or 0) turns this file off: every status sample goes to every reader.
+
+#define _GNU_SOURCE
+#include <dlfcn.h>
+#include <link.h>
+#include <pthread.h>
+#include <stdbool.h>
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "_cdr.h"
+#include "_fastdds_layout.h"
+#include "_filter_class.h"
+#include "_guard.h"
+#include "_guard_log.h"
+#include "_guard_status.h"
+
+#define CHANGE_REMOVED \
+  "_ZN8eprosima8fastrtps4rtps11ReaderProxy23change_has_been_removedERKNS1_16SequenceNumber_tE"
+#define CHANGE_IS_ACKED \
+  "_ZNK8eprosima8fastrtps4rtps11ReaderProxy15change_is_ackedERKNS1_16SequenceNumber_tE"
+#define RTPS_IS_RELEVANT \
+  "_ZNK8eprosima8fastrtps4rtps11ReaderProxy16rtps_is_relevantEPNS1_13CacheChange_tE"
+#define TAKE_REQUEST "rmw_take_request"
+
+#define STATUS_TOPIC_PREFIX "rt/"
+#define STATUS_TOPIC_SUFFIX "/_action/status"
+#define STATUS_TYPE "action_msgs::msg::dds_::GoalStatusArray_"
+#define GOAL_SERVICE_SUFFIX "/_action/send_goal"
+#define UUID_SIZE 16
+#define PREFIX_SIZE 12
+
+#if CFT_LAYOUT_KNOWN && defined(RMW_SERVICE_NAME) && defined(RMW_INFO_WRITER_GUID)
+#define STATUS_LAYOUT_KNOWN 1
+_Static_assert(RMW_GUID_SIZE == 16, "rmw's writer_guid is not a 16-byte GUID");
+#else
+#define STATUS_LAYOUT_KNOWN 0
+#endif
+
+enum {
+  REQUESTS,     // goal requests recorded with their requester
+  IMPLAUSIBLE,  // goal requests whose header did not read as a user endpoint's GUID
+  VERDICTS,     // verdicts for kept status readers
+  CHANGED,      // of those, passed: a goal of the reader changed
+  OWED,         // passed: owed, the reader's previous sample was replaced before its ack
+  WITHHELD,     // not passed
+  UNKNOWN,      // entries of goals whose requester was not known (passed to every reader)
+  MALFORMED,    // samples that did not read as a GoalStatusArray (passed)
+  RESETS,       // times the requesters' record was full and cleared
+  COUNTERS
+};
+static unsigned long counters[COUNTERS];
+static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_RELAXED); }
+
+// CFT_GUARD_STATUS: on unless "off" or "0", and only where the guard knows the Fast DDS.
+static bool status_on(void) {
+  static int on = -1;  // -1: not read yet
+  int v = __atomic_load_n(&on, __ATOMIC_RELAXED);
+  if (v >= 0) return v;
+  const char *text = getenv("CFT_GUARD_STATUS");
+  v = !(text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0)) &&
+      STATUS_LAYOUT_KNOWN && cft_guard_knows_fastdds2();
+  __atomic_store_n(&on, v, __ATOMIC_RELAXED);
+  return v;
+}
+
+static bool ends_with(const char *s, const char *tail) {
+  size_t n = strlen(s), m = strlen(tail);
+  return n >= m && strcmp(s + n - m, tail) == 0;
+}
+
+bool cft_status_keeps(const char *topic, const char *type) {
+  return topic != NULL && type != NULL && strncmp(topic, STATUS_TOPIC_PREFIX, 3) == 0 &&
+         ends_with(topic, STATUS_TOPIC_SUFFIX) && strcmp(type, STATUS_TYPE) == 0 && status_on();
+}
+
+static uint64_t mix(const uint8_t *uuid) {
+  uint64_t a, b;
+  memcpy(&a, uuid, 8);
+  memcpy(&b, uuid + 8, 8);
+  uint64_t h = (a ^ (b * 0x9E3779B97F4A7C15ull)) * 0xBF58476D1CE4E5B9ull;
+  return h ^ (h >> 31);
+}
+
+// ---- the requesters: goal UUID -> the requesting participant's GUID prefix -----------------------
+#define REQUESTER_SLOTS (1u << 16)
+struct requester {
+  uint8_t uuid[UUID_SIZE];
+  uint8_t prefix[PREFIX_SIZE];
+  bool used;
+};
+static struct requester *requesters;  // REQUESTER_SLOTS, allocated with the first request
+static unsigned requester_count;
+static pthread_mutex_t requesters_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static struct requester *requester_slot(const uint8_t *uuid) {
+  unsigned mask = REQUESTER_SLOTS - 1;
+  for (unsigned i = (unsigned)mix(uuid) & mask;; i = (i + 1) & mask)
+    if (!requesters[i].used || memcmp(requesters[i].uuid, uuid, UUID_SIZE) == 0)
+      return &requesters[i];
+}
+
+static void record_requester(const uint8_t *uuid, const uint8_t *guid) {
+  pthread_mutex_lock(&requesters_lock);
+  if (requesters == NULL) requesters = calloc(REQUESTER_SLOTS, sizeof *requesters);
+  if (requesters != NULL) {
+    if (requester_count >= REQUESTER_SLOTS / 2) {
+      memset(requesters, 0, REQUESTER_SLOTS * sizeof *requesters);
+      requester_count = 0;
+      count(RESETS);
+    }
+    struct requester *r = requester_slot(uuid);
+    if (!r->used) requester_count++;
+    memcpy(r->uuid, uuid, UUID_SIZE);
+    memcpy(r->prefix, guid, PREFIX_SIZE);
+    r->used = true;
+    count(REQUESTS);
+  }
+  pthread_mutex_unlock(&requesters_lock);
+}
+
+// Called with requesters_lock held: the requester's prefix, or NULL when it is not known.
+static const uint8_t *requester_of(const uint8_t *uuid) {
+  if (requesters == NULL) return NULL;
+  const struct requester *r = requester_slot(uuid);
+  return r->used ? r->prefix : NULL;
+}
+
+// The definition of rmw_take_request that rcl would have called: the one in a loaded object other
+// than the guard, rmw_implementation's first (rclpy loads it in a local scope, and the wheels
+// rename it, so neither RTLD_NEXT nor its soname finds it). Looked up once, outside Fast DDS.
+#define MAX_OBJECTS 512
+struct objects {
+  int count;
+  char *names[MAX_OBJECTS];
+};
+
+static int collect_object(struct dl_phdr_info *info, size_t size, void *data) {
+  (void)size;
+  struct objects *o = data;
+  if (info->dlpi_name != NULL && info->dlpi_name[0] != '\0' && o->count < MAX_OBJECTS) {
+    char *name = strdup(info->dlpi_name);
+    if (name != NULL) o->names[o->count++] = name;
+  }
+  return 0;
+}
+
+typedef int32_t (*take_request_fn)(const void *service, void *header, void *request, bool *taken);
+
+static take_request_fn find_take_request(void *ours) {
+  struct objects o = {0};
+  dl_iterate_phdr(collect_object, &o);  // dlopen only after it: it holds the loader's lock
+  void *found = NULL;
+  bool preferred = false;
+  for (int i = 0; i < o.count; i++) {
+    void *handle = dlopen(o.names[i], RTLD_LAZY | RTLD_NOLOAD);
+    void *p = handle != NULL ? dlsym(handle, TAKE_REQUEST) : NULL;
+    Dl_info where;
+    // Defined in this object itself, not found through its dependencies.
+    if (p != NULL && p != ours && dladdr(p, &where) != 0 && where.dli_fname != NULL &&
+        strcmp(where.dli_fname, o.names[i]) == 0) {
+      bool rmw_implementation = strstr(o.names[i], "rmw_implementation") != NULL;
+      if (found == NULL || (rmw_implementation && !preferred)) found = p, preferred = rmw_implementation;
+    }
+    // The handle stays open: the object is loaded anyway, and `found` must not outlive it.
+    free(o.names[i]);
+  }
+  return (take_request_fn)found;
+}
+
+CFT_EXPORT int32_t rmw_take_request(const void *service, void *request_header, void *ros_request,
+                                    bool *taken);
+static take_request_fn real_take_request;
+static pthread_once_t take_request_once = PTHREAD_ONCE_INIT;
+static void resolve_take_request(void) {
+  real_take_request = find_take_request((void *)rmw_take_request);
+}
+
+int32_t rmw_take_request(const void *service, void *request_header, void *ros_request,
+                         bool *taken) {
+  pthread_once(&take_request_once, resolve_take_request);
+  take_request_fn real = real_take_request;
+  if (real == NULL) {
+    cft_say("no rmw_take_request after the guard's: a service request cannot be taken");
+    return 1;  // RMW_RET_ERROR
+  }
+  int32_t ret = real(service, request_header, ros_request, taken);
+#if STATUS_LAYOUT_KNOWN
+  if (ret == 0 && taken != NULL && *taken && service != NULL && request_header != NULL &&
+      ros_request != NULL && status_on()) {
+    const char *name;
+    memcpy(&name, (const uint8_t *)service + RMW_SERVICE_NAME, sizeof name);
+    if (name != NULL && ends_with(name, GOAL_SERVICE_SUFFIX)) {
+      const uint8_t *guid = (const uint8_t *)request_header + RMW_INFO_WRITER_GUID;
+      uint8_t kind = guid[15];  // a user writer's (0x02, 0x03) or reader's (0x04, 0x07)
+      if (kind == 0x02 || kind == 0x03 || kind == 0x04 || kind == 0x07)
+        record_requester(ros_request, guid);
+      else
+        count(IMPLAUSIBLE);
+    }
+  }
+#endif
+  return ret;
+}
+
+// ---- a kept reader's record: its goals' statuses in the last sample it was passed ---------------
+struct record_slot {
+  uint8_t uuid[UUID_SIZE];
+  int8_t status;
+  bool used;
+};
+struct record {
+  unsigned capacity;  // a power of two
+  unsigned count;
+  struct record_slot slots[];
+};
+
+static struct record *record_new(unsigned capacity) {
+  struct record *r = calloc(1, sizeof *r + capacity * sizeof r->slots[0]);
+  if (r != NULL) r->capacity = capacity;
+  return r;
+}
+
+static struct record_slot *record_find(struct record *r, const uint8_t *uuid) {
+  unsigned mask = r->capacity - 1;
+  for (unsigned i = (unsigned)mix(uuid) & mask;; i = (i + 1) & mask)
+    if (!r->slots[i].used || memcmp(r->slots[i].uuid, uuid, UUID_SIZE) == 0) return &r->slots[i];
+}
+
+static bool records_this_status(struct record *r, const uint8_t *uuid, int8_t status) {
+  const struct record_slot *s = record_find(r, uuid);
+  return s->used && s->status == status;
+}
+
+// Any expression of the reader's form (`cft_status_table = <n>`): the reader names its own table
+// with it, which means nothing here. The program is the reader's record.
+static void *status_compile(const char *expression) {
+  if (expression == NULL || strncmp(expression, "cft_status_table", 16) != 0) return NULL;
+  return record_new(16);
+}
+
+const struct cft_filter_grammar cft_guard_status_grammar = {status_compile, NULL, NULL, NULL};
+
+// ---- owed samples: the write's frame ---------------------------------------------------------------
+static __thread struct cft_status_frame *frame;  // the innermost write on this thread
+static __thread const void *asking;              // the ReaderProxy whose rtps_is_relevant runs
+static bool status_readers;  // a status reader was kept: only then are removals looked at
+
+void cft_status_frame_open(struct cft_status_frame *f) {
+  f->outer = frame;
+  f->count = 0;
+  f->overflow = false;
+  frame = f;
+}
+
+void cft_status_frame_close(struct cft_status_frame *f) { frame = f->outer; }
+
+static bool owed(void) {
+  if (frame == NULL || asking == NULL) return false;
+  if (frame->overflow) return true;
+  for (int i = 0; i < frame->count; i++)
+    if (frame->readers[i] == asking) return true;
+  return false;
+}
+
+// The definition of `name` in the library that called the interposed member (its return address
+// is there): these members are Fast DDS's own, called only from within its library.
+static void *real_in_caller(void **cache, const char *name, const void *return_address) {
+  void *p = __atomic_load_n(cache, __ATOMIC_ACQUIRE);
+  if (p != NULL) return p;
+  Dl_info info;
+  if (dladdr(return_address, &info) != 0 && info.dli_fname != NULL) {
+    void *handle = dlopen(info.dli_fname, RTLD_LAZY | RTLD_NOLOAD);
+    p = handle != NULL ? dlsym(handle, name) : NULL;
+  }
+  if (p == NULL) p = dlsym(RTLD_NEXT, name);
+  __atomic_store_n(cache, p, __ATOMIC_RELEASE);
+  return p;
+}
+
+typedef void (*removed_fn)(void *self, const void *sequence);
+typedef bool (*acked_fn)(const void *self, const void *sequence);
+typedef bool (*relevant_fn)(const void *self, void *change);
+static void *real_removed, *real_acked, *real_relevant;
+
+CFT_EXPORT void cft_change_has_been_removed(void *self, const void *sequence)
+    __asm__(CHANGE_REMOVED);
+void cft_change_has_been_removed(void *self, const void *sequence) {
+  const void *caller = __builtin_return_address(0);
+  removed_fn real = (removed_fn)real_in_caller(&real_removed, CHANGE_REMOVED, caller);
+  if (frame != NULL && __atomic_load_n(&status_readers, __ATOMIC_RELAXED)) {
+    acked_fn acked = (acked_fn)real_in_caller(&real_acked, CHANGE_IS_ACKED, caller);
+    if (acked != NULL && !acked(self, sequence)) {
+      if (frame->count < CFT_STATUS_FRAME_READERS) frame->readers[frame->count++] = self;
+      else frame->overflow = true;
+    }
+  }
+  if (real != NULL) real(self, sequence);
+  else cft_say("no real %s: the guard cannot forward it", CHANGE_REMOVED);
+}
+
+static void restore_asking(const void **saved) { asking = *saved; }
+
+CFT_EXPORT bool cft_rtps_is_relevant(const void *self, void *change) __asm__(RTPS_IS_RELEVANT);
+bool cft_rtps_is_relevant(const void *self, void *change) {
+  relevant_fn real = (relevant_fn)real_in_caller(&real_relevant, RTPS_IS_RELEVANT,
+                                                 __builtin_return_address(0));
+  if (real == NULL) return true;  // deliver, as to a reader without a filter
+  const void *saved __attribute__((cleanup(restore_asking))) = asking;
+  asking = self;
+  return real(self, change);
+}
+
+// ---- the verdict -----------------------------------------------------------------------------------
+static uint32_t read_u32(const uint8_t *p, bool little) {
+  return little ? (uint32_t)p[0] | (uint32_t)p[1] << 8 | (uint32_t)p[2] << 16 | (uint32_t)p[3] << 24
+                : (uint32_t)p[3] | (uint32_t)p[2] << 8 | (uint32_t)p[1] << 16 | (uint32_t)p[0] << 24;
+}
+
+static size_t align4(size_t offset) { return (offset + 3) & ~(size_t)3; }
+
+// GoalStatus in plain CDR, from the body's start: uint8 uuid[16], int32 sec and uint32 nanosec
+// (4-byte aligned), int8 status (as native/reader/_status_trim.c reads it).
+static size_t next_entry(size_t pos) { return align4(pos + UUID_SIZE) + 9; }
+static int8_t status_at(const uint8_t *body, size_t pos) {
+  return (int8_t)body[align4(pos + UUID_SIZE) + 8];
+}
+
+// The body offsets of the entries that go to the reader, in a buffer of the thread's.
+static __thread size_t *mine;
+static __thread size_t mine_capacity;
+
+bool cft_status_verdict(void **program, const void *payload, const void *reader_guid) {
+  struct record *r = *program;
+  count(VERDICTS);
+  bool is_owed = owed();
+  uint32_t length, n = 0;
+  bool little;
+  const uint8_t *body = cft_cdr_body(payload, &length, &little);
+  size_t end = 4;
+  if (body != NULL && length >= 4) {
+    n = read_u32(body, little);
+    for (uint32_t i = 0; i < n && end <= length; i++) end = next_entry(end);
+  }
+  if (body != NULL && length >= 4 && end <= length && n > mine_capacity) {
+    size_t *grown = realloc(mine, n * sizeof *mine);
+    if (grown != NULL) mine = grown, mine_capacity = n;
+  }
+  if (body == NULL || length < 4 || end > length || n > mine_capacity) {
+    memset(r->slots, 0, r->capacity * sizeof r->slots[0]);
+    r->count = 0;
+    count(MALFORMED);
+    return true;
+  }
+  unsigned relevant = 0;
+  bool changed = false;
+  pthread_mutex_lock(&requesters_lock);
+  for (size_t i = 0, pos = 4; i < n; i++, pos = next_entry(pos)) {
+    const uint8_t *prefix = requester_of(body + pos);
+    if (prefix != NULL && memcmp(prefix, reader_guid, PREFIX_SIZE) != 0) continue;
+    if (prefix == NULL) count(UNKNOWN);
+    mine[relevant++] = pos;
+    if (!changed && !records_this_status(r, body + pos, status_at(body, pos))) changed = true;
+  }
+  pthread_mutex_unlock(&requesters_lock);
+  bool passes = changed || is_owed;
+  count(changed ? CHANGED : is_owed ? OWED : WITHHELD);
+  if (!passes) return false;
+  // The record becomes this sample's entries for the reader.
+  unsigned capacity = r->capacity;
+  while (capacity < 2 * relevant + 2) capacity *= 2;
+  if (capacity != r->capacity) {
+    struct record *grown = record_new(capacity);
+    if (grown == NULL) return true;  // the record stays: later samples pass more often, not less
+    free(r);
+    *program = r = grown;
+  } else {
+    memset(r->slots, 0, r->capacity * sizeof r->slots[0]);
+  }
+  r->count = relevant;
+  for (unsigned i = 0; i < relevant; i++) {
+    struct record_slot *s = record_find(r, body + mine[i]);
+    memcpy(s->uuid, body + mine[i], UUID_SIZE);
+    s->status = status_at(body, mine[i]);
+    s->used = true;
+  }
+  return true;
+}
+
+// Called by _guard_filter.c when it keeps a status reader: removals are looked at from then on.
+void cft_status_reader_kept(void) { __atomic_store_n(&status_readers, true, __ATOMIC_RELAXED); }
+
+// ---- the C API, for ctypes -------------------------------------------------------------------------
+// In the order of the enum above: 0 requests recorded, 1 implausible request headers, 2 verdicts,
+// 3 passed (changed), 4 passed (owed), 5 withheld, 6 entries of unknown requesters, 7 malformed
+// samples, 8 resets of the requesters' record.
+CFT_EXPORT unsigned long cft_guard_status_count(int which) {
+  return which >= 0 && which < COUNTERS ? __atomic_load_n(&counters[which], __ATOMIC_RELAXED) : 0;
+}

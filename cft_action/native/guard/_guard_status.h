@@ -1,0 +1,44 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The server guard's status filter (_guard_status.c), as _guard.c and _guard_filter.c call it.
+#ifndef CFT_ACTION_GUARD_STATUS_H_
+#define CFT_ACTION_GUARD_STATUS_H_
+
+#include <stdbool.h>
+
+#ifndef CFT_EXPORT
+#define CFT_EXPORT __attribute__((visibility("default")))
+#endif
+
+// The grammar under which _guard_filter.c keeps the reader of an action's status topic whose
+// filter is of CFT_STATUS_CLASS: its compile gives the reader's record of what it was passed.
+extern const struct cft_filter_grammar cft_guard_status_grammar;
+
+// Whether the status filter is on (CFT_GUARD_STATUS, a known Fast DDS 2.14, and rmw's and Fast
+// DDS's layouts from the build's headers), and a reader on `topic` with `type` is an action
+// status reader that it may keep.
+bool cft_status_keeps(const char *topic, const char *type);
+
+// The verdict for a kept status reader on a change's serialized payload: passed when the sample
+// changes the status of a goal that the reader's participant requested (or one whose requester is
+// not known), or when the reader is owed it (see _guard_status.c). *record is the reader's record,
+// which the verdict may move (realloc) as it grows.
+bool cft_status_verdict(void **record, const void *payload, const void *reader_guid);
+
+// _guard_filter.c kept a status reader: from now on the writes' removals are looked at.
+void cft_status_reader_kept(void);
+
+// One write (perform_create_new_change) of one writer: the readers that a change the write removed
+// from the history had been passed to and had not acknowledged. Opened and closed by _guard.c's
+// wrapper, on the writing thread, with the writer's mutex held by Fast DDS inside it.
+#define CFT_STATUS_FRAME_READERS 64
+struct cft_status_frame {
+  struct cft_status_frame *outer;  // a write nested in this one's (statistics writers)
+  int count;
+  bool overflow;                   // more than CFT_STATUS_FRAME_READERS: every reader is owed
+  const void *readers[CFT_STATUS_FRAME_READERS];  // ReaderProxy objects, compared, never read
+};
+void cft_status_frame_open(struct cft_status_frame *frame);
+void cft_status_frame_close(struct cft_status_frame *frame);
+
+#endif  // CFT_ACTION_GUARD_STATUS_H_

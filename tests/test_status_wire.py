@@ -1,0 +1,91 @@
+"""Status on the wire: under the guard, a client of the library receives the status samples that
+change one of its own goals, plus those it is owed (cft_action/native/guard/_guard_status.c).
+
+An action server's status writer sends every GoalStatusArray, which lists every goal, to every
+client. A guarded server's writer sends one to a client of the library only if it changes the
+status of a goal that the client's participant requested, or if the sample before it, which the
+client had been passed, was replaced (keep-last 1) before the client acknowledged it; plain clients
+get every sample. Each client runs in its own process, on UDP only; a raw socket on loopback (root)
+reads the status writer's DATA by destination port, one port per client's participant
+(:func:`harness.capture.samples_by_port`). Every goal handle must end with the status that plain
+rclpy's would have (SUCCEEDED), counted by each client (``stale_handles``).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Optional, Sequence
+
+import pytest
+
+from harness.capture import samples_by_port
+from tests.support import clients_on_the_wire, WireRun
+
+pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='a raw socket needs root')
+
+
+def status_on_the_wire(clients: Sequence[tuple[str, int, int]], guarded: bool = True,
+                       server_env: Optional[dict[str, str]] = None) -> WireRun:
+    """Run the server and one client process per (mode or ``rclpy``, goals, order), started
+    together, capturing what each port received from the status writer while the goals ran.
+
+    The server holds every goal after its first feedback until 2 s after ``go``: by then each
+    client has its goal handles. A status sample that comes before a goal's response is executed
+    updates no handle in rclpy, and with keep-last 1 a later one may never come: plain rclpy's
+    handles are left behind then too (measured: 5 of 8 in a burst of 48 goals), which is not what
+    these tests are about."""
+    return clients_on_the_wire(clients, samples_by_port, ('status',), guarded=guarded,
+                               server_env=server_env, together=True, release_after=2.0)
+
+
+def assert_no_stale_handle(run: WireRun, clients: Sequence[tuple[str, int, int]]) -> None:
+    for (mode, goals, _), report in zip(clients, run.reports):
+        assert report['results'] == goals and report['stale_handles'] == 0, (mode, report)
+
+
+def status_samples(run: WireRun) -> list[set]:
+    """The status samples each port received, most first (the plain client's is the first)."""
+    return sorted((set(seen.samples) for seen in run.captured.values()), key=len, reverse=True)
+
+
+MIXED = (('client', 3, 5), ('goals', 3, 5), ('off', 3, 5), ('rclpy', 3, 5))
+
+
+def test_each_client_receives_the_status_samples_of_its_own_goals() -> None:
+    """Under the guard: the plain client receives every status sample the server wrote, each of
+    the library's clients (every feedback filter mode) a subset of them, none carries a filter
+    signature, and every goal handle of every client ends SUCCEEDED."""
+    run = status_on_the_wire(MIXED)
+    assert_no_stale_handle(run, MIXED)
+    plain, *filtered = status_samples(run)
+    assert len(filtered) == len(MIXED) - 1, run.captured.keys()
+    for samples in filtered:
+        assert samples < plain, (len(samples), len(plain))
+    assert all(set(seen.samples.values()) == {None} for seen in run.captured.values())
+    status = run.stats_after['guard_status']
+    assert status['verdicts'] > 0 and status['withheld'] > 0, status
+    assert status['unknown'] == status['malformed'] == status['implausible'] == 0, status
+
+
+BURST = tuple(('client', 8, 1) for _ in range(5)) + (('rclpy', 8, 1),)
+
+
+def test_bursts_of_transitions_leave_no_goal_handle_behind() -> None:
+    """48 one-feedback goals of six clients, released at once: status samples replace each other
+    in the writer's keep-last 1 history faster than the clients acknowledge them, so samples are
+    owed (the guard passes them whatever they list), and every handle still ends SUCCEEDED, as the
+    plain client's do."""
+    run = status_on_the_wire(BURST)
+    assert_no_stale_handle(run, BURST)
+    status = run.stats_after['guard_status']
+    assert status['owed'] > 0 and status['withheld'] > 0, status
+
+
+def test_with_the_status_filter_off_every_client_receives_every_sample() -> None:
+    """``CFT_GUARD_STATUS=off``: the guarded server's status writer sends as rmw_fastrtps does."""
+    clients = (('client', 2, 3), ('rclpy', 2, 3))
+    run = status_on_the_wire(clients, server_env={'CFT_GUARD_STATUS': 'off'})
+    assert_no_stale_handle(run, clients)
+    samples = status_samples(run)
+    assert len(samples) == 2 and samples[0] == samples[1], [len(s) for s in samples]
+    assert run.stats_after['guard_status']['verdicts'] == 0
