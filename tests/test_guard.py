@@ -269,7 +269,7 @@ def test_rclpy_publisher_runs_normally_under_the_guard(procs: list[Proc]) -> Non
     assert received is not None and int(received.split()[1]) >= 10, listener.tail()
 
 
-CHURN_UPDATES = 300
+CHURN_UPDATES = 200
 CHURN_INTERVAL = 0.02
 FEEDBACK_PERIOD = 0.0005
 
@@ -278,7 +278,7 @@ def churn_scenario(guarded: bool) -> dict:
     """Fast-DDS issue 4878's churn: the ``update`` cell of :mod:`harness.hazard`.
 
     A server (guarded or not) publishing feedback every 0.5 ms to a goal that an ordinary client
-    keeps running, and a client that changes its feedback filter every 20 ms, 300 times. Returns
+    keeps running, and a client that changes its feedback filter every 20 ms, 200 times. Returns
     what happened; the tests assert on it. The same cell with DDS-SQL on an unguarded server is
     a measurement, not a test: ``CFT_ACTION_WRITER_FILTERING=any python -m benchmarks.hazard
     --events update --guard off`` (docs/SAFETY.md).
@@ -304,7 +304,7 @@ def test_churn_server_survives_with_the_guard() -> None:
 
 def test_churn_of_the_library_filter_class_never_crashes_an_unguarded_server() -> None:
     """The default filter class is unknown to an unguarded server: it keeps no filter for the
-    reader, so 300 filter changes at a 0.5 ms feedback period are nothing to it."""
+    reader, so 200 filter changes at a 0.5 ms feedback period are nothing to it."""
     outcome = churn_scenario(guarded=False)
     dump = json.dumps(outcome, indent=1)
     assert 'error' not in outcome, dump

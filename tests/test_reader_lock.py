@@ -28,7 +28,7 @@ def test_filter_changes_while_samples_arrive_do_not_crash_the_reader():
     churn = None
     try:
         publisher.send('flood 40')  # longer than the churn; the publisher is stopped after it
-        churn = helper_process('tests.helpers.filter_churn', [f'{prefix}/ints', 10], timeout=40)
+        churn = helper_process('tests.helpers.filter_churn', [f'{prefix}/ints', 6], timeout=40)
         line = churn.expect('SURVIVED', timeout=30)
         assert churn.wait(10) == 0, churn.tail()
     finally:

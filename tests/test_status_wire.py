@@ -29,13 +29,13 @@ def status_on_the_wire(clients: Sequence[tuple[str, int, int]], guarded: bool = 
     """Run the server and one client process per (mode or ``rclpy``, goals, order), started
     together, capturing what each port received from the status writer while the goals ran.
 
-    The server holds every goal after its first feedback until 2 s after ``go``: by then each
+    The server holds every goal after its first feedback until 1.5 s after ``go``: by then each
     client has its goal handles. A status sample that comes before a goal's response is executed
     updates no handle in rclpy, and with keep-last 1 a later one may never come: plain rclpy's
     handles are left behind then too (measured: 5 of 8 in a burst of 48 goals), which is not what
     these tests are about."""
     return clients_on_the_wire(clients, samples_by_port, ('status',), guarded=guarded,
-                               server_env=server_env, together=True, release_after=2.0)
+                               server_env=server_env, together=True, release_after=1.5)
 
 
 def assert_no_stale_handle(run: WireRun, clients: Sequence[tuple[str, int, int]]) -> None:
