@@ -97,8 +97,9 @@ class OwnGoalStatus:
         (cft_action/native/reader/_status_trim.c).
 
         rmw_fastrtps recreates the DataReader for its first filter (docs/INTERNALS.md section 4),
-        so this must run before any executor waits on the subscription. No writer knows the class
-        (section 20): the server sends every sample, and this process's reader judges it.
+        so this must run before any executor waits on the subscription. An unguarded server does
+        not know the class and sends every sample, which this process's reader judges; a guarded
+        one sends only those that change this client's goals, or that it owes it (section 20).
         """
         if self._table is None or self.subscription is None:
             return

@@ -12,7 +12,8 @@
 // of this process that discovers a reader with this class gets no filter for it (the factory says
 // unsupported), so it sends that reader everything and filters nothing, unguarded.
 // Besides the shared classes it answers one of its own, CFT_STATUS_CLASS (_status_trim.h), which
-// the guard does not know: no writer anywhere filters status (docs/INTERNALS.md section 20).
+// the guard answers its own way, for its status writers (native/guard/_guard_status.c;
+// docs/INTERNALS.md section 20).
 #include <string.h>
 
 #include "_patch.h"
