@@ -27,22 +27,20 @@ Results (machine, date, command, every raw figure) go to
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import statistics
 import sys
 import time
-from pathlib import Path
 from typing import Any, Optional, Sequence
 
 from cft_action import guard
 from harness import c_server, load
 from harness.cli import name_list
 from harness.domain import unused_domain
-from harness.proc import Proc, ROOT, python_module
-from harness.report import fmt, grid, markdown_table, say
+from harness.proc import Proc, python_module
+from harness.report import (add_results_arguments, fmt, grid, markdown_only, markdown_table,
+                            results_start, say)
 
 #: int32 elements after the 3-element header: 36 B and 1 kB feedback messages.
 SIZES = {'36B': 0, '1k': 250, '10k': 2500}
@@ -194,25 +192,20 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--sizes', type=name_list(SIZES), default=['36B', '1k'])
     parser.add_argument('--guards', type=name_list(GUARDS), default=list(GUARDS))
     parser.add_argument('--rounds', type=int, default=1, help='phases of each configuration')
-    parser.add_argument('--out', type=Path, help='results file (default: benchmarks/results/)')
-    parser.add_argument('--markdown', type=Path, help='print the tables of a results file')
+    add_results_arguments(parser)
     return parser.parse_args(argv)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Build the C server, run each (guard, feedback size) point, write the results after each
+    point, and print the tables."""
     args = parse_args(argv)
-    if args.markdown:
-        print(markdown(json.loads(args.markdown.read_text())))
+    if markdown_only(args, markdown):
         return 0
-    started = datetime.datetime.now(datetime.timezone.utc)
-    output = args.out or (ROOT / 'benchmarks' / 'results' /
-                          f'c-server-{started.date().isoformat()}-{platform.node()}.json')
+    output, header = results_start('c_server', args.out, argv)
     result: dict[str, Any] = {
-        'benchmark': 'c_server', 'started': started.isoformat(timespec='seconds'),
-        'command': 'python -m benchmarks.c_server ' + ' '.join(sys.argv[1:] if argv is None
-                                                               else argv),
-        'machine': load.environment_facts(), 'servers': args.servers, 'clients': args.clients,
-        'goals': args.goals, 'order': args.order, 'period': args.period, 'points': []}
+        **header, 'servers': args.servers, 'clients': args.clients, 'goals': args.goals,
+        'order': args.order, 'period': args.period, 'points': []}
     c_server.build()
     for guard_mode in args.guards:
         for size in args.sizes:

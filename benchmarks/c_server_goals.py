@@ -26,21 +26,19 @@ Results go to ``benchmarks/results/c-server-goals-<date>-<host>.json``.
 from __future__ import annotations
 
 import argparse
-import datetime
 import json
 import os
-import platform
 import sys
 import time
-from pathlib import Path
-from typing import Any, Optional, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 from cft_action import guard
 from harness import c_server, load
 from harness.cli import name_list
 from harness.domain import unused_domain
-from harness.proc import Proc, ROOT, python_module
-from harness.report import fmt, grid, markdown_table, say
+from harness.proc import Proc, python_module
+from harness.report import (add_results_arguments, fmt, grid, markdown_only, markdown_table,
+                            results_start, say)
 from harness.status_model import status_array_size
 
 CONFIGS = ('client', 'rclpy')
@@ -156,31 +154,32 @@ def markdown(result: dict[str, Any]) -> str:
                       *markdown_table(rows[0], rows[1:], ['---'] + ['---:'] * (len(rows[0]) - 1))])
 
 
+#: The options: flag, type, default, help.
+OPTIONS: tuple[tuple[str, Callable[[str], Any], Any, str], ...] = (
+    ('--goals', int, 2000, 'concurrent goals of the one client'),
+    ('--order', int, 4, 'feedback messages per goal'),
+    ('--period', float, 2.0, 'feedback period, s'),
+    ('--configs', name_list(CONFIGS), list(CONFIGS), 'the clients, one phase each'),
+    ('--timeout', float, 600.0, 'seconds a phase may take'),
+)
+
+
 def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
+    """The command line."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--goals', type=int, default=2000)
-    parser.add_argument('--order', type=int, default=4, help='feedback messages per goal')
-    parser.add_argument('--period', type=float, default=2.0, help='feedback period, s')
-    parser.add_argument('--configs', type=name_list(CONFIGS), default=list(CONFIGS))
-    parser.add_argument('--timeout', type=float, default=600.0, help='seconds a phase may take')
-    parser.add_argument('--out', type=Path, help='results file (default: benchmarks/results/)')
-    parser.add_argument('--markdown', type=Path, help='print the table of a results file')
+    for flag, kind, default, text in OPTIONS:
+        parser.add_argument(flag, type=kind, default=default, help=text)
+    add_results_arguments(parser)
     return parser.parse_args(argv)
 
 
 def main(argv: Optional[Sequence[str]] = None) -> int:
+    """Run each configuration's phase, write the results after each, and print the table."""
     args = parse_args(argv)
-    if args.markdown:
-        print(markdown(json.loads(args.markdown.read_text())))
+    if markdown_only(args, markdown):
         return 0
-    started = datetime.datetime.now(datetime.timezone.utc)
-    output = args.out or (ROOT / 'benchmarks' / 'results' /
-                          f'c-server-goals-{started.date().isoformat()}-{platform.node()}.json')
-    result: dict[str, Any] = {
-        'benchmark': 'c_server_goals', 'started': started.isoformat(timespec='seconds'),
-        'command': 'python -m benchmarks.c_server_goals ' + ' '.join(
-            sys.argv[1:] if argv is None else argv),
-        'machine': load.environment_facts(), 'phases': []}
+    output, header = results_start('c_server_goals', args.out, argv)
+    result: dict[str, Any] = {**header, 'phases': []}
     c_server.build()
     for config in args.configs:
         say(f'{LABELS[config]}: {args.goals} goals of {args.order} feedback')

@@ -416,25 +416,28 @@ def markdown(results: dict[str, Any]) -> str:
     return '\n'.join(out)
 
 
+#: The numeric options: flag, type, default, help.
+OPTIONS: tuple[tuple[str, Callable[[str], Any], Any, str], ...] = (
+    ('--hz', float, 100.0, 'publication rate'),
+    ('--size', int, 1000, 'serialized message bytes'),
+    ('--max-rate', float, 2.0, "the subscribers' max_rate"),
+    ('--window', float, 20.0, 'part 1 seconds'),
+    ('--counts', int_list, [1, 8, 32], 'part 2 subscriber counts'),
+    ('--per-process', int, 8, 'part 2 subscribers (participants) per process'),
+    ('--cpu-window', float, 10.0, 'part 2 seconds per phase'),
+    ('--rounds', int, 100, 'part 3 polls'),
+    ('--poll-n', int, 3, 'part 3 messages per poll'),
+    ('--poll-settle', float, 0.3, 'part 3 seconds to wait for extra messages after each poll'),
+    ('--warmup', float, 3.0, 'seconds after matching before a window starts'),
+)
+
+
 def parse_args(argv: Sequence[str]) -> argparse.Namespace:
     """The command line."""
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0],
                                      formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    parser.add_argument('--hz', type=float, default=100.0, help='publication rate')
-    parser.add_argument('--size', type=int, default=1000, help='serialized message bytes')
-    parser.add_argument('--max-rate', type=float, default=2.0, help='the subscribers\' max_rate')
-    parser.add_argument('--window', type=float, default=20.0, help='part 1 seconds')
-    parser.add_argument('--counts', type=int_list, default=[1, 8, 32],
-                        help='part 2 subscriber counts')
-    parser.add_argument('--per-process', type=int, default=8,
-                        help='part 2 subscribers (participants) per process')
-    parser.add_argument('--cpu-window', type=float, default=10.0, help='part 2 seconds per phase')
-    parser.add_argument('--rounds', type=int, default=100, help='part 3 polls')
-    parser.add_argument('--poll-n', type=int, default=3, help='part 3 messages per poll')
-    parser.add_argument('--poll-settle', type=float, default=0.3,
-                        help='part 3 seconds to wait for extra messages after each poll')
-    parser.add_argument('--warmup', type=float, default=3.0,
-                        help='seconds after matching before a window starts')
+    for flag, kind, default, text in OPTIONS:
+        parser.add_argument(flag, type=kind, default=default, help=text)
     parser.add_argument('--parts', default='bytes,cpu,polls',
                         help='which parts to run, comma-separated')
     parser.add_argument('--output', type=Path, default=None,

@@ -7,7 +7,51 @@ of ``harness`` and writes a results file, and the report (these tables, and the 
 
 from __future__ import annotations
 
-from typing import Optional, Sequence
+import argparse
+import datetime
+import json
+import platform
+import sys
+from pathlib import Path
+from typing import Any, Callable, Optional, Sequence
+
+from harness.proc import ROOT
+
+
+def add_results_arguments(parser: argparse.ArgumentParser) -> None:
+    """``--out FILE`` (where the results go) and ``--markdown RESULTS`` (run nothing: print the
+    tables of a results file), for :func:`results_start` and :func:`markdown_only`."""
+    parser.add_argument('--out', type=Path, help='results file (default: benchmarks/results/)')
+    parser.add_argument('--markdown', type=Path, help='print the tables of a results file')
+
+
+def markdown_only(args: argparse.Namespace, present: Callable[[dict[str, Any]], str]) -> bool:
+    """With ``--markdown RESULTS``, print ``present(results)`` and return True: run nothing."""
+    if args.markdown is None:
+        return False
+    print(present(json.loads(args.markdown.read_text())))
+    return True
+
+
+def results_start(benchmark: str, out: Optional[Path], argv: Optional[Sequence[str]]
+                  ) -> tuple[Path, dict[str, Any]]:
+    """Where a benchmark's results go, and the fields every results file begins with.
+
+    :param benchmark: the module's name under ``benchmarks`` (``c_server``).
+    :param out: the ``--out`` given, else ``benchmarks/results/<name>-<date>-<host>.json``.
+    :param argv: the arguments of ``main``, or None for ``sys.argv``'s.
+    :return: (the file, ``{'benchmark', 'started', 'command', 'machine'}``).
+    """
+    from harness import load  # load reports through this module
+
+    started = datetime.datetime.now(datetime.timezone.utc)
+    name = benchmark.replace('_', '-')
+    output = out or (ROOT / 'benchmarks' / 'results' /
+                     f'{name}-{started.date().isoformat()}-{platform.node()}.json')
+    arguments = sys.argv[1:] if argv is None else argv
+    return output, {'benchmark': benchmark, 'started': started.isoformat(timespec='seconds'),
+                    'command': f'python -m benchmarks.{benchmark} ' + ' '.join(arguments),
+                    'machine': load.environment_facts()}
 
 
 def say(*words: object) -> None:

@@ -339,16 +339,21 @@ stopped:
 }
 
 // ---- the executor's work, each with the server's mutex held ---------------------------------------
+// Whether a take gave a request: false when there was none (its error reset) or it failed (said).
+static bool taken(rcl_ret_t ret, const char *what) {
+  if (ret == RCL_RET_ACTION_SERVER_TAKE_FAILED) {
+    rcl_reset_error();
+    return false;
+  }
+  return ok(ret, what);
+}
+
 static void take_goal_request(server_t *s) {
   rmw_request_id_t header;
   goal_request_t request;
   test_msgs__action__Fibonacci_SendGoal_Request__init(&request);
   rcl_ret_t ret = rcl_action_take_goal_request(&s->action_server, &header, &request);
-  if (ret == RCL_RET_ACTION_SERVER_TAKE_FAILED) {
-    rcl_reset_error();
-    return;
-  }
-  if (!ok(ret, "take_goal_request")) return;
+  if (!taken(ret, "take_goal_request")) return;
   s->goal_requests++;
   goal_response_t response;
   test_msgs__action__Fibonacci_SendGoal_Response__init(&response);
@@ -415,11 +420,7 @@ static void take_cancel_request(server_t *s) {
   rcl_action_cancel_request_t request;
   action_msgs__srv__CancelGoal_Request__init(&request);
   rcl_ret_t ret = rcl_action_take_cancel_request(&s->action_server, &header, &request);
-  if (ret == RCL_RET_ACTION_SERVER_TAKE_FAILED) {
-    rcl_reset_error();
-    return;
-  }
-  if (!ok(ret, "take_cancel_request")) return;
+  if (!taken(ret, "take_cancel_request")) return;
   s->cancel_requests++;
   rcl_action_cancel_response_t response = rcl_action_get_zero_initialized_cancel_response();
   if (ok(rcl_action_process_cancel_request(&s->action_server, &request, &response),
@@ -442,11 +443,7 @@ static void take_result_request(server_t *s) {
   result_request_t request;
   test_msgs__action__Fibonacci_GetResult_Request__init(&request);
   rcl_ret_t ret = rcl_action_take_result_request(&s->action_server, &header, &request);
-  if (ret == RCL_RET_ACTION_SERVER_TAKE_FAILED) {
-    rcl_reset_error();
-    return;
-  }
-  if (!ok(ret, "take_result_request")) return;
+  if (!taken(ret, "take_result_request")) return;
   s->result_requests++;
   goal_t *g = find_goal(s, request.goal_id.uuid);
   if (g == NULL) {

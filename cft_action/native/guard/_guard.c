@@ -340,6 +340,16 @@ int cft_guard_knows_fastdds2(void) {
   return __atomic_load_n(&ready(0)->state, __ATOMIC_ACQUIRE) == CFT_GUARD_ACTIVE;
 }
 
+bool cft_guard_part_on(int *cache, const char *env, bool usable) {
+  int v = __atomic_load_n(cache, __ATOMIC_RELAXED);
+  if (v >= 0) return v;
+  const char *text = getenv(env);
+  v = !(text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0)) && usable &&
+      cft_guard_knows_fastdds2();
+  __atomic_store_n(cache, v, __ATOMIC_RELAXED);
+  return v;
+}
+
 static void missing(struct family *f, int fn) {
   static int told;
   if (!__atomic_exchange_n(&told, 1, __ATOMIC_RELAXED))

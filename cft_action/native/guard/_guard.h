@@ -13,6 +13,8 @@
 #ifndef CFT_ACTION_GUARD_H_
 #define CFT_ACTION_GUARD_H_
 
+#include <stdbool.h>
+
 #ifndef CFT_EXPORT
 #define CFT_EXPORT __attribute__((visibility("default")))
 #endif
@@ -20,6 +22,11 @@
 // 1 when _guard.c locks the Fast DDS 2.14 it knows, whose layouts the other parts may then use.
 // Decides the family's state if it is not decided yet: call it only once Fast DDS is loaded.
 int cft_guard_knows_fastdds2(void);
+
+// Whether a part of the guard that `env` can turn off ("off" or "0") is on: `usable` (its layouts
+// are known) and the guard locks the Fast DDS 2.14 it knows. Decided once, cached in *cache (-1:
+// not yet).
+bool cft_guard_part_on(int *cache, const char *env, bool usable);
 
 // The definition of `name` in the loaded library `soname` (rmw loads Fast DDS and its own
 // libraries RTLD_LOCAL, outside the global scope), else the next one after the guard's; NULL if

@@ -114,13 +114,7 @@ static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_
 // CFT_GUARD_STATUS: on unless "off" or "0", and only where the guard knows the Fast DDS.
 static bool status_on(void) {
   static int on = -1;  // -1: not read yet
-  int v = __atomic_load_n(&on, __ATOMIC_RELAXED);
-  if (v >= 0) return v;
-  const char *text = getenv("CFT_GUARD_STATUS");
-  v = !(text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0)) &&
-      STATUS_LAYOUT_KNOWN && cft_guard_knows_fastdds2();
-  __atomic_store_n(&on, v, __ATOMIC_RELAXED);
-  return v;
+  return cft_guard_part_on(&on, "CFT_GUARD_STATUS", STATUS_LAYOUT_KNOWN);
 }
 
 static bool ends_with(const char *s, const char *tail) {
