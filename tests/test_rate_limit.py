@@ -108,10 +108,14 @@ def test_max_rate_can_be_changed_and_lifted(ros, publishers):
     topic, children, _ = publishers
     subscription, received = subscribe(ros, topic, max_rate=2)
     set_max_rate(subscription, 1000)
-    ros.spin_for(0.5)  # the change reaches the writers by discovery
-    publish(children, topic, 1, ros)
+    ros.spin_for(0.5)  # the change reaches the writers by discovery, on a loaded machine later
+    publish(children, topic, 2, ros)
     ros.spin_for(0.5)
-    assert min(per_publisher(received).values()) >= 0.9 * SOURCE_HZ
+    # Once the change has arrived (within the first second), every message passes: of the
+    # second second's, at least 0.9x came (a keep-last 10 reader on a loaded machine may lag).
+    for base in BASES:
+        second = [d for d in received if base + SOURCE_HZ <= d < base + 2 * SOURCE_HZ]
+        assert len(second) >= 0.9 * SOURCE_HZ, (base, len(second), per_publisher(received))
     set_max_rate(subscription, None)
     assert rate_filter_state(subscription, ros.node).max_rate is None
 
