@@ -25,7 +25,8 @@ if signal.getsignal(signal.SIGINT) == signal.SIG_IGN:
 
 import pytest
 
-from harness.ros import RosSession
+from harness.ros import RosSession, unique_name
+from tests.support import helper_process
 
 
 @pytest.fixture
@@ -71,3 +72,14 @@ def pytest_report_header(config):
     """The session's domain, so that a failure can be matched with the other processes on it."""
     return [f"ROS_DOMAIN_ID={os.environ['ROS_DOMAIN_ID']} (LOCALHOST discovery)",
             f'native backtrace on a fatal signal: {config.native_backtrace}']
+
+
+@pytest.fixture
+def publisher():
+    """tests/helpers/publisher.py in its own process: yields (its topics' prefix, the process)."""
+    prefix = '/' + unique_name('cft_pub')
+    child = helper_process('tests.helpers.publisher', [prefix])
+    try:
+        yield prefix, child
+    finally:
+        child.stop()

@@ -21,16 +21,6 @@ BURST = 30
 WORDS = ('hello', 'world', 'hello world')  # as tests/helpers/publisher.py sends them
 
 
-@pytest.fixture
-def publisher():
-    prefix = '/' + unique_name('cft_sub')
-    child = helper_process('tests.helpers.publisher', [prefix])
-    try:
-        yield prefix, child
-    finally:
-        child.stop()
-
-
 def collect(ros, msg_type, topic, expression, parameters=()):
     received = []
     subscription = create_filtered_subscription(

@@ -35,7 +35,6 @@ from cft_action.topics.message_yaml import message_to_yaml
 from harness.crash import live_backtrace
 from harness.proc import Proc
 from harness.ros import unique_name
-from tests.support import helper_process
 
 CLI = [sys.executable, '-m', 'cft_action.cli']
 # Runs the CLI as if the rmw implementation had no content filtering: the code path that a Jazzy
@@ -127,16 +126,6 @@ def run_cli(*args: str, command: Sequence[str] = CLI, timeout: float = 30) -> Cl
     finally:
         cli.interrupt()
     return cli
-
-
-@pytest.fixture
-def publisher():
-    prefix = '/' + unique_name('cft_cli')
-    child = helper_process('tests.helpers.publisher', [prefix])
-    try:
-        yield prefix, child
-    finally:
-        child.stop()
 
 
 @pytest.fixture
