@@ -292,8 +292,10 @@ def summarize(phase: dict[str, Any]) -> dict[str, Any]:
         'guard_filter_events_window': calls_after - calls_before,
         'guard_filter_events_total': calls_after,
         'guard_compiled_window': compiled - compiled_before, 'guard_compiled_total': compiled,
-        'guard_uuid_verdicts': after.get('guard_filter', {}).get('relevance_verdicts', 0)
-        - before.get('guard_filter', {}).get('relevance_verdicts', 0),
+        # The feedback readers' verdicts: the status readers' are counted apart too.
+        'guard_uuid_verdicts': sum(sign * (s.get('guard_filter', {}).get('relevance_verdicts', 0)
+                                           - s.get('guard_status', {}).get('verdicts', 0))
+                                   for sign, s in ((1, after), (-1, before))),
         'client_cpu_s': report['cpu_s'], 'client_maxrss_mb': report['maxrss_kb'] / 1024,
         'client_rss_ready_mb': phase['ready']['rss_kb'] / 1024,
         'client_rss_end_mb': report['rss_kb'] / 1024,

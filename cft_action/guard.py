@@ -278,7 +278,7 @@ def reply_counts() -> dict[str, int]:
 
 #: The counters of cft_guard_status_count() in _guard_status.c, in its order.
 STATUS_COUNTERS = ('requests', 'implausible', 'verdicts', 'changed', 'owed', 'withheld',
-                   'unknown', 'malformed', 'resets')
+                   'unknown', 'malformed', 'resets', 'kept')
 
 #: Environment variable that turns the status filter off (``off`` or ``0``).
 STATUS_ENV = 'CFT_GUARD_STATUS'
@@ -299,7 +299,9 @@ def status_counts() -> dict[str, int]:
       sample that changes one of the reader's goals, ``owed`` one owed to it, ``withheld`` none;
     - ``unknown``: entries of goals whose requester was not recorded (they go to every reader);
     - ``malformed``: samples that did not read as a GoalStatusArray (passed);
-    - ``resets``: times the record of requesters was full (32,768 goals) and started anew.
+    - ``resets``: times the record of requesters was full (32,768 goals) and started anew;
+    - ``kept``: status readers the guard keeps (they are in ``filter_counts()['kept']`` too, and
+      their verdicts in its ``relevance_verdicts``).
 
     An empty dict when the guard is not preloaded.
     """

@@ -28,8 +28,8 @@ ORDER = 5
 def evaluations(stats: dict, kept: bool) -> int:
     """The server's verdicts on the clients' filters (of the library's class): the guard's own for
     readers it keeps, else those of the class's filters in Fast DDS's collection."""
-    if kept:
-        return stats['guard_filter']['relevance_verdicts']
+    if kept:  # the feedback readers' (status readers are kept too: their verdicts apart)
+        return stats['guard_filter']['relevance_verdicts'] - stats['guard_status']['verdicts']
     return stats['guard_filter_class']['verdicts']
 
 

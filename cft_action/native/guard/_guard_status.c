@@ -106,6 +106,7 @@ enum {
   UNKNOWN,      // entries of goals whose requester was not known (passed to every reader)
   MALFORMED,    // samples that did not read as a GoalStatusArray (passed)
   RESETS,       // times the requesters' record was full and cleared
+  KEPT,         // status readers kept by _guard_filter.c (of its `kept`)
   COUNTERS
 };
 static unsigned long counters[COUNTERS];
@@ -441,12 +442,15 @@ bool cft_status_verdict(void **program, const void *payload, const void *reader_
 }
 
 // Called by _guard_filter.c when it keeps a status reader: removals are looked at from then on.
-void cft_status_reader_kept(void) { __atomic_store_n(&status_readers, true, __ATOMIC_RELAXED); }
+void cft_status_reader_kept(void) {
+  __atomic_store_n(&status_readers, true, __ATOMIC_RELAXED);
+  count(KEPT);
+}
 
 // ---- the C API, for ctypes -------------------------------------------------------------------------
 // In the order of the enum above: 0 requests recorded, 1 implausible request headers, 2 verdicts,
 // 3 passed (changed), 4 passed (owed), 5 withheld, 6 entries of unknown requesters, 7 malformed
-// samples, 8 resets of the requesters' record.
+// samples, 8 resets of the requesters' record, 9 status readers kept.
 CFT_EXPORT unsigned long cft_guard_status_count(int which) {
   return which >= 0 && which < COUNTERS ? __atomic_load_n(&counters[which], __ATOMIC_RELAXED) : 0;
 }
