@@ -18,15 +18,18 @@ def test_poll_prints_n_per_publisher_and_exits_and_max_rate_limits_hz():
         clis = [Cli('topic', 'echo', topic, 'std_msgs/msg/Int32', '--poll', '3', '--timeout', '30',
                     *RELIABLE),
                 Cli('topic', 'hz', topic, 'std_msgs/msg/Int32', '--max-rate', '5', '--timeout',
-                    '8', *RELIABLE)]
+                    '10', *RELIABLE)]
         assert child.request('wait ints 2', 'MATCHED') == 'MATCHED'
-        child.send('steady 100 6 0')
+        child.send('steady 100 4 0')
         echo, hz = clis
         assert echo.wait(30) == 0, echo.log()  # by itself, once the publisher's 3 came
         assert [d['data'] for d in echo.documents()] == [0, 1, 2], echo.log()
         assert hz.wait(30) == 0, hz.log()
-        rates = [float(m) for m in re.findall(r'average rate: ([0-9.]+)', '\n'.join(hz.stdout))]
-        assert rates and 4.5 <= rates[-1] <= 5.05, hz.log()  # the first message after each 0.2 s
+        # The first message after each 0.2 s passes the writer: 4 s make 20 (21 with the first),
+        # all before hz's --timeout, which counts from its start. hz's rate is of arrival times,
+        # which a loaded machine bunches; the count is the writer's decision.
+        windows = [int(m) for m in re.findall(r'window: ([0-9]+)', '\n'.join(hz.stdout))]
+        assert windows and 18 <= windows[-1] <= 21, hz.log()
     finally:
         for cli in clis:
             cli.interrupt()
