@@ -267,20 +267,31 @@ def prove_parameter_events(ros: RosSession, handler: Any, nodes: Proc, names: Se
     nodes (mode ``'nodes'``) each name must already be watched. Returns what it took, for the
     message of a later failure.
     """
-    seen: set[str] = set()
-    handles = [handler.add_parameter_callback('sync', n, lambda p, n=n: seen.add(n))
-               for n in names]
+    # Round r sets sync to 1..r and waits for the event of r: the writer delivers in order, so
+    # once the last set's event is in, every earlier one has come or never will (filtered by the
+    # writer's previous filter). No proof event can then arrive during the caller's count.
+    last: dict[str, int] = {}
+    handles = [handler.add_parameter_callback(
+        'sync', n, lambda p, n=n: last.__setitem__(n, p.value.integer_value)) for n in names]
     updates = handler.parameter_event_filter_state.updates
     started = time.monotonic()
     rounds = 0
+    asked: dict[str, int] = {}
     try:
         deadline = started + timeout
-        while seen != set(names) and time.monotonic() < deadline:
+
+        def proven() -> bool:
+            return all(n in asked and last.get(n) == asked[n] for n in names)
+
+        while not proven() and time.monotonic() < deadline:
             rounds += 1
-            for name in set(names) - seen:
-                nodes.request(f'set {name} sync 1', 'SET')
-            ros.spin_until(lambda: seen == set(names), timeout=0.3)
-        assert seen == set(names), f'no event from {set(names) - seen} within {timeout} s'
+            for name in names:
+                if name not in asked or last.get(name) != asked[name]:
+                    asked[name] = rounds
+                    nodes.request(f'set {name} sync {rounds}', 'SET')
+            ros.spin_until(proven, timeout=0.3)
+        missing = {n for n in names if last.get(n) != asked.get(n)}
+        assert not missing, f'no event from {missing} within {timeout} s'
     finally:
         for handle in handles:
             handler.remove_parameter_callback(handle)
