@@ -79,7 +79,7 @@ def server_published(child):
     ('client', False),  # the default mode is safe for an unguarded server at 100 Hz
 ], ids=['client', 'goals', 'off', 'client-unguarded-server'])
 def test_three_clients_each_get_exactly_their_own_feedback(ros, mode, guarded):
-    clients, goals, order = 3, 5, 10
+    clients, goals, order = 3, 3, 10
     action = '/' + unique_name('fib')
     child = start_server(action, guarded=guarded)
     try:

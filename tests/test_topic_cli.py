@@ -362,7 +362,7 @@ def test_hz_and_bw_report_the_filtered_rate(publisher, clis):
                      '--content-filter', ' data = %0 ', '--content-filter-params', 'world',
                      '--content-filter-fallback=client', *RELIABLE, command=NO_CFT_CLI)
     assert child.request('wait strings 4', 'MATCHED', timeout=30) == 'MATCHED'
-    count, period = 250, 0.02  # 50 Hz for 5 s; 'world' is every third sample
+    count, period = 150, 0.02  # 50 Hz for 3 s; 'world' is every third sample
     start = time.monotonic()
     child.request(f'burst {count} {period}', 'SENT', timeout=30)
     true_rate = (count / 3) / (time.monotonic() - start)  # the rate of the matching samples
