@@ -3,8 +3,8 @@ sample that is not theirs (cft_action/native/guard/_guard_heartbeats.c).
 
 A keep-last-10 writer's history is nearly always full, and Fast DDS 2.14 then heartbeats every
 reader at each write: a filtered reader, which gets none of the DATA, receives a HEARTBEAT of its
-own per write. The guard lets that HEARTBEAT to all readers through at most once per
-``CFT_GUARD_HEARTBEAT_ALL_MS`` per writer; otherwise it goes with the DATA to the DATA's readers.
+own per write. The guard keeps that HEARTBEAT with the DATA, to the DATA's readers
+(``CFT_GUARD_HEARTBEAT_ALL_MS``, default ``never``).
 On the wire (UDP only, captured on loopback as in tests/test_signatures.py): each filtered reader
 gets no more lone HEARTBEATs than the guard let through, and exactly its own feedback; the plain
 reader beside them gets every sample.
@@ -27,7 +27,7 @@ SLACK = 20
 pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='a raw socket needs root')
 
 
-def test_a_full_history_heartbeats_filtered_readers_only_as_often_as_the_guard_lets_it() -> None:
+def test_a_full_history_sends_filtered_readers_no_heartbeat_per_foreign_write() -> None:
     clients = [('client', 'guarded'), ('client', 'guarded'), ('rclpy', 'guarded')]
     run = feedback_on_the_wire(clients, writer_datagrams_by_port, GOALS, ORDER, feedback_depth=10)
     for report in run.reports:
@@ -35,6 +35,7 @@ def test_a_full_history_heartbeats_filtered_readers_only_as_often_as_the_guard_l
     before, after = run.stats_at_go['guard_heartbeats'], run.stats_after['guard_heartbeats']
     counts = {k: after[k] - before[k] for k in after}
     assert counts['narrowed'] > 0, counts  # the history was full, and the guard narrowed it
+    assert counts['widened'] == 0, counts  # CFT_GUARD_HEARTBEAT_ALL_MS=never, the default
     # The port of each client's participant: the plain one got DATA for every write.
     captured = run.captured
     writes = GOALS * ORDER * len(clients)

@@ -13,11 +13,13 @@
 // 1. A HEARTBEAT to all readers. StatefulWriter::send_heartbeat_piggyback_nts_ calls
 //    select_all_readers_nts, which widens the message to every reader, when the writer's history
 //    is full (a keep-last-10 writer nearly always is), when acknowledgements lag, or when its byte
-//    budget is spent. The definition of select_all_readers_nts below lets that widening through at
-//    most once per CFT_GUARD_HEARTBEAT_ALL_MS (default 10 ms) per writer; otherwise the HEARTBEAT
-//    rides with the DATA to the DATA's readers. Every other caller of select_all_readers_nts (the
-//    periodic heartbeat) is let through. A writer without filtered readers has every reader
-//    selected already, so nothing changes for it or for plain readers.
+//    budget is spent. The definition of select_all_readers_nts below keeps that HEARTBEAT with the
+//    DATA, to the DATA's readers (CFT_GUARD_HEARTBEAT_ALL_MS: `never`, the default; a number of ms
+//    lets the widening through at most that often per writer; `off`: always). A reader the DATA
+//    is not for learns the writer's range from the personal GAP and HEARTBEAT before its next DATA
+//    and from the periodic heartbeat, which every other caller of select_all_readers_nts sends and
+//    which goes through. A writer without filtered readers has every reader selected already, so
+//    nothing changes for it or for plain readers.
 // 2. From 2.14.6 (eProsima/Fast-DDS #6181), a GAP for the reader's run of filtered-out changes:
 //    deliver_sample_to_network begins with add_gaps_for_removed_irrelevants for every reader with
 //    such a run. The definition below drops the calls made from there. The run stays recorded in
@@ -31,6 +33,7 @@
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
+#include <limits.h>
 #include <pthread.h>
 #include <stdbool.h>
 #include <stdint.h>
@@ -51,7 +54,6 @@
 #define PIGGYBACK_CALLER SW_PREFIX "29send_heartbeat_piggyback_nts_"
 #define DELIVER_CALLER SW_PREFIX "25deliver_sample_to_network"
 
-#define DEFAULT_HEARTBEAT_ALL_MS 10
 
 enum { NARROWED = 0, WIDENED = 1, GAPS_DEFERRED = 2, GAPS_PASSED = 3, COUNTERS = 4 };
 static unsigned long counters[COUNTERS];
@@ -103,25 +105,29 @@ static int caller_of(uintptr_t address) {
 
 // ---- the switches --------------------------------------------------------------------------
 // CFT_GUARD_HEARTBEAT_ALL_MS: at most one HEARTBEAT to all readers per this many ms per writer
-// from the piggyback; "off": as Fast DDS. -1 when off, else nanoseconds.
+// from the piggyback; "never" (the default): none; "off": as Fast DDS. -1 when off, NEVER when
+// never, else nanoseconds.
+#define NEVER LONG_MAX
 static long heartbeat_all_ns(void) {
   static long interval = -2;  // -2: not read yet
   long v = __atomic_load_n(&interval, __ATOMIC_RELAXED);
   if (v != -2) return v;
   const char *text = getenv("CFT_GUARD_HEARTBEAT_ALL_MS");
-  long ms = DEFAULT_HEARTBEAT_ALL_MS;
-  if (text != NULL && strcmp(text, "off") == 0) {
-    ms = -1;
-  } else if (text != NULL && text[0] != '\0') {
+  if (text == NULL || text[0] == '\0' || strcmp(text, "never") == 0) {
+    v = NEVER;
+  } else if (strcmp(text, "off") == 0) {
+    v = -1;
+  } else {
     char *end;
-    ms = strtol(text, &end, 10);
+    long ms = strtol(text, &end, 10);
+    v = ms * 1000000L;
     if (*end != '\0' || ms < 0 || ms > 60000) {
-      cft_say("CFT_GUARD_HEARTBEAT_ALL_MS=%.40s is not off or a number of ms from 0 to 60000; "
-              "using %d", text, DEFAULT_HEARTBEAT_ALL_MS);
-      ms = DEFAULT_HEARTBEAT_ALL_MS;
+      cft_say("CFT_GUARD_HEARTBEAT_ALL_MS=%.40s is not never, off or a number of ms from 0 to "
+              "60000; using never", text);
+      v = NEVER;
     }
   }
-  v = ms < 0 || !cft_guard_knows_fastdds2() ? -1 : ms * 1000000L;
+  if (!cft_guard_knows_fastdds2()) v = -1;
   __atomic_store_n(&interval, v, __ATOMIC_RELAXED);
   return v;
 }
@@ -174,7 +180,7 @@ CFT_EXPORT void cft_select_all_readers_nts2(void *self, void *group, void *locat
 void cft_select_all_readers_nts2(void *self, void *group, void *locator_selector) {
   long interval = heartbeat_all_ns();
   if (interval >= 0 && caller_of((uintptr_t)__builtin_return_address(0)) == PIGGYBACK) {
-    if (!widening_due((uintptr_t)self, interval)) {
+    if (interval == NEVER || !widening_due((uintptr_t)self, interval)) {
       count(NARROWED);
       return;
     }
