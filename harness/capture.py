@@ -242,6 +242,9 @@ class PortTraffic(NamedTuple):
     #: Of those, the bytes of datagrams whose every DATA or fragment of the writers had come before
     #: (repairs the writer sent again after a NACK).
     resent_octets: int
+    #: (writer GUID, sequence number) -> the serialized payload of its DATA (from the
+    #: encapsulation header on; unfragmented samples only, the last copy).
+    payloads: dict[tuple[bytes, int], bytes]
 
 
 def _pieces(payload: bytes, writers: set[bytes]) -> set[tuple[bytes, int, int]]:
@@ -255,9 +258,9 @@ def _pieces(payload: bytes, writers: set[bytes]) -> set[tuple[bytes, int, int]]:
 def samples_by_port(interface: str, writers: set[bytes], stop: threading.Event,
                     listening: threading.Event) -> dict[int, PortTraffic]:
     """The DATA and DATA_FRAG submessages of ``writers`` received on ``interface`` until ``stop``
-    is set, and the bytes of the datagrams naming them, by UDP destination port (one port per
-    reader's participant). Sets ``listening`` once the socket is bound. Unfragmented IPv4
-    datagrams only."""
+    is set, their payloads, and the bytes of the datagrams naming them, by UDP destination port
+    (one port per reader's participant). Sets ``listening`` once the socket is bound.
+    Unfragmented IPv4 datagrams only."""
     found: dict[int, PortTraffic] = {}
     received: dict[int, set[tuple[bytes, int, int]]] = {}
     for port, payload in _received_udp(interface, stop, listening):
@@ -269,13 +272,28 @@ def samples_by_port(interface: str, writers: set[bytes], stop: threading.Event,
         pieces, before = _pieces(payload, writers), received.setdefault(port, set())
         again = bool(pieces) and pieces <= before
         before.update(pieces)
-        seen = found.setdefault(port, PortTraffic({}, 0, 0))
+        seen = found.setdefault(port, PortTraffic({}, 0, 0, {}))
         found[port] = seen._replace(octets=seen.octets + len(payload),
                                     resent_octets=seen.resent_octets + again * len(payload))
         for writer, sequence, signatures in filter_signatures(payload):
             if writer in writers:
                 seen.samples[(writer, sequence)] = signatures
+        for kind, flags, order, body, writer, sequence in _samples(payload):
+            if kind == _DATA and writer in writers:
+                seen.payloads[(writer, sequence)] = _serialized(body, flags, order)
     return found
+
+
+def _serialized(body: bytes, flags: int, order: str) -> bytes:
+    """The serialized payload (from its encapsulation header on) of one DATA submessage body."""
+    at = 4 + struct.unpack(order + 'H', body[2:4])[0]  # octetsToInlineQos counts from there
+    if flags & 0x02:  # Q: an inline QoS parameter list, up to its sentinel
+        while at + 4 <= len(body):
+            pid, length = struct.unpack(order + 'HH', body[at:at + 4])
+            at += 4 + length
+            if pid == _PID_SENTINEL:
+                break
+    return body[at:] if flags & 0x04 else b''  # D: the submessage carries data
 
 
 def data_by_port(interface: str, writers: set[bytes], stop: threading.Event,

@@ -7,18 +7,21 @@ status of a goal that the client's participant requested, or if the sample befor
 client had been passed, was replaced (keep-last 1) before the client acknowledged it; plain clients
 get every sample. Each client runs in its own process, on UDP only; a raw socket on loopback (root)
 reads the status writer's DATA by destination port, one port per client's participant
-(:func:`harness.capture.samples_by_port`). Every goal handle must end with the status that plain
-rclpy's would have (SUCCEEDED), counted by each client (``stale_handles``).
+(:func:`harness.capture.samples_by_port`), and their payloads: every sample a client of the library
+received changes one of its own goals since the sample it received before, or is one of those the
+guard passed as owed. Every goal handle must end with the status that plain rclpy's would have
+(SUCCEEDED), counted by each client (``stale_handles``).
 """
 
 from __future__ import annotations
 
+import itertools
 import os
 from typing import Optional, Sequence
 
 import pytest
 
-from harness.capture import samples_by_port
+from harness.capture import PortTraffic, samples_by_port
 from tests.support import clients_on_the_wire, WireRun
 
 pytestmark = pytest.mark.skipif(os.geteuid() != 0, reason='a raw socket needs root')
@@ -48,15 +51,55 @@ def status_samples(run: WireRun) -> list[set]:
     return sorted((set(seen.samples) for seen in run.captured.values()), key=len, reverse=True)
 
 
+def goal_statuses(payload: bytes) -> dict[bytes, int]:
+    """Goal UUID -> status, of one serialized GoalStatusArray."""
+    from action_msgs.msg import GoalStatusArray
+    from rclpy.serialization import deserialize_message
+    array = deserialize_message(payload, GoalStatusArray)
+    return {bytes(s.goal_info.goal_id.uuid): s.status for s in array.status_list}
+
+
+def unexplained(seen: PortTraffic, own: set[bytes]) -> int:
+    """The status samples a port received that changed none of the ``own`` goals' statuses since
+    the sample it received before (a goal not in that one counts as changed)."""
+    count, before = 0, {}
+    for _, payload in sorted(seen.payloads.items()):
+        statuses = {goal: status for goal, status in goal_statuses(payload).items() if goal in own}
+        count += all(before.get(goal) == status for goal, status in statuses.items())
+        before = statuses
+    return count
+
+
+def assert_own_or_owed(run: WireRun, clients: Sequence[tuple[str, int, int]]) -> None:
+    """Each port but the plain client's belongs to one client of the library (its participant),
+    and every status sample it received changed one of that client's goals, but for at most as
+    many as the guard passed because they were owed."""
+    owned = [{bytes.fromhex(goal) for goal in report['goal_ids']}
+             for (mode, _, _), report in zip(clients, run.reports) if mode != 'rclpy']
+    plain = max(run.captured.values(), key=lambda seen: len(seen.samples))
+    left = [seen for seen in run.captured.values() if seen is not plain]
+    assert len(left) == len(owned), run.captured.keys()
+    # Each port's owner: the one-to-one assignment of clients to ports that leaves the fewest
+    # samples unexplained; a sample that changes no goal of its port's owner was passed as owed.
+    table = [[unexplained(seen, own) for own in owned] for seen in left]
+    fewest = min(sum(table[port][client] for port, client in enumerate(owners))
+                 for owners in itertools.permutations(range(len(owned))))
+    status = run.stats_after['guard_status']
+    owed = status['owed'] - run.stats_at_go['guard_status']['owed']
+    assert fewest <= owed, (table, owed)
+
+
 MIXED = (('client', 3, 5), ('goals', 3, 5), ('off', 3, 5), ('rclpy', 3, 5))
 
 
 def test_each_client_receives_the_status_samples_of_its_own_goals() -> None:
     """Under the guard: the plain client receives every status sample the server wrote, each of
-    the library's clients (every feedback filter mode) a subset of them, none carries a filter
-    signature, and every goal handle of every client ends SUCCEEDED."""
+    the library's clients (every feedback filter mode) a subset of them, each changing one of its
+    own goals or owed, none carries a filter signature, and every goal handle of every client ends
+    SUCCEEDED."""
     run = status_on_the_wire(MIXED)
     assert_no_stale_handle(run, MIXED)
+    assert_own_or_owed(run, MIXED)
     plain, *filtered = status_samples(run)
     assert len(filtered) == len(MIXED) - 1, run.captured.keys()
     for samples in filtered:
@@ -77,6 +120,7 @@ def test_bursts_of_transitions_leave_no_goal_handle_behind() -> None:
     plain client's do."""
     run = status_on_the_wire(BURST)
     assert_no_stale_handle(run, BURST)
+    assert_own_or_owed(run, BURST)
     status = run.stats_after['guard_status']
     assert status['owed'] > 0 and status['withheld'] > 0, status
 

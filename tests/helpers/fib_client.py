@@ -99,6 +99,7 @@ def main() -> None:
         'complete_goals': sum(ks == list(range(order)) for ks in received.values()),
         'own_received': sum(len(ks) for ks in received.values()),
         'misrouted': misrouted,
+        'goal_ids': [key.hex() for key in received],
         'results': sum(r.done() for r in results),
         # goal handles whose status the status topic did not bring to SUCCEEDED
         'stale_handles': sum(h.status != GoalStatus.STATUS_SUCCEEDED for h in handles),
