@@ -247,7 +247,7 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'cft_status_table_free': (_reader_lock, None, [_void_p], None),
     'cft_status_table_sending': (_reader_lock, ctypes.c_int, [_void_p, ctypes.c_char_p], None),
     'cft_status_table_responded':
-        (_reader_lock, None, [_void_p, ctypes.c_char_p, ctypes.c_int], None),
+        (_reader_lock, ctypes.c_int, [_void_p, ctypes.c_char_p, ctypes.c_int], None),
     'cft_status_trim':
         (_reader_lock, ctypes.c_long, [_void_p, _void_p, ctypes.c_size_t, _void_p,
                                        ctypes.POINTER(ctypes.c_size_t), ctypes.c_char_p,
@@ -608,9 +608,14 @@ class StatusTable:
         if _lib.cft_status_table_sending(self._table, bytes(goal_uuid)) != 0:
             raise MemoryError('cft_status_table_sending: out of memory')
 
-    def responded(self, goal_uuid: bytes, accepted: bool) -> None:
-        """The goal's response was executed: its goal handle exists, or it was rejected."""
-        _lib.cft_status_table_responded(self._table, bytes(goal_uuid), int(accepted))
+    def responded(self, goal_uuid: bytes, accepted: bool) -> Optional[int]:
+        """The goal's response was executed: its goal handle exists, or it was rejected.
+
+        :return: for an accepted goal, the status in the last sample that listed it before, which
+            no handle took; else None.
+        """
+        early = _lib.cft_status_table_responded(self._table, bytes(goal_uuid), int(accepted))
+        return None if early < 0 else int(early)
 
     def take(self, subscription_ptr: int, responding: Optional[bytes],
              all_pending: bool) -> tuple[Optional[bytes], int]:

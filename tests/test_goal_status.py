@@ -45,8 +45,8 @@ class Table:
     def sending(self, goal_uuid: bytes) -> None:
         assert _rcl._lib.cft_status_table_sending(self.table, goal_uuid) == 0
 
-    def responded(self, goal_uuid: bytes, accepted: bool) -> None:
-        _rcl._lib.cft_status_table_responded(self.table, goal_uuid, int(accepted))
+    def responded(self, goal_uuid: bytes, accepted: bool) -> int:
+        return _rcl._lib.cft_status_table_responded(self.table, goal_uuid, int(accepted))
 
     def trim(self, sample: bytes, responding: bytes | None = None,
              all_pending: bool = True) -> tuple[int, bytes]:
@@ -131,19 +131,39 @@ def test_an_accepted_goal_gets_its_first_entry_and_each_change_once():
     table.sending(rejected)
     executing = [entry(mine, GoalStatus.STATUS_EXECUTING), entry(other, 1),
                  entry(rejected, GoalStatus.STATUS_EXECUTING)]
-    assert table.delivered(executing, all_pending=False) == []
-    assert table.delivered(executing, mine, all_pending=False) == [executing[0]]
-    assert table.delivered(executing, other, all_pending=False) == []
-    assert len(table.delivered(executing)) == 2
-    table.responded(mine, True)
-    table.responded(rejected, False)
+    assert table.responded(mine, True) == -1  # no sample listed it: no early status
+    assert table.responded(rejected, False) == -1
     assert table.delivered(executing) == [executing[0]]
     assert table.delivered(executing) == []
     succeeded = [entry(other, 4), entry(mine, GoalStatus.STATUS_SUCCEEDED)]
     assert table.delivered(succeeded) == [succeeded[1]]
     assert table.delivered(succeeded) == []
-    table.responded(mine, True)  # a late duplicate response changes nothing
+    assert table.responded(mine, True) == -1  # a late duplicate response changes nothing
     assert table.delivered(succeeded) == []
+    assert _rcl._lib.cft_status_table_count(table.table, 3) == 0
+
+
+def test_a_status_that_came_before_the_response_goes_to_the_new_handle():
+    """A sample that lists a pending goal without its response updates no handle in rclpy; the
+    table keeps the last such status and hands it over when the goal is accepted (the client
+    gives it to rclpy's execute then), after which only changes from it go. A terminal one ends
+    the goal in the table; a rejected goal has none."""
+    table = Table()
+    mine, done, rejected = os.urandom(16), os.urandom(16), os.urandom(16)
+    for goal_uuid in (mine, done, rejected):
+        table.sending(goal_uuid)
+    first = [entry(mine, GoalStatus.STATUS_ACCEPTED), entry(done, GoalStatus.STATUS_EXECUTING),
+             entry(rejected, GoalStatus.STATUS_ACCEPTED)]
+    later = [entry(mine, GoalStatus.STATUS_EXECUTING), entry(done, GoalStatus.STATUS_SUCCEEDED)]
+    assert table.delivered(first, all_pending=False) == []
+    assert table.delivered(later, all_pending=False) == []
+    assert table.delivered(first, mine, all_pending=False) == [first[0]]  # an older one, with
+    assert table.delivered(later, mine, all_pending=False) == [later[0]]  # mine's response
+    assert table.responded(mine, True) == GoalStatus.STATUS_EXECUTING
+    assert table.delivered(later, all_pending=False) == []  # the handle has it
+    assert table.delivered([entry(mine, GoalStatus.STATUS_SUCCEEDED)]) != []
+    assert table.responded(done, True) == GoalStatus.STATUS_SUCCEEDED
+    assert table.responded(rejected, False) == -1
     assert _rcl._lib.cft_status_table_count(table.table, 3) == 0
 
 
@@ -206,7 +226,10 @@ class ShadowedClient(ActionClient):
 
     The shadow is rclpy's status loop run on the whole sample that the trim read: a goal handle
     made in this execute starts UNKNOWN, then every entry of an existing, unfinished handle sets
-    its status. After each execute every goal handle must hold the shadow's status.
+    its status. One difference from rclpy, the library's: a handle starts with the status of the
+    last sample that listed its goal before its response, if one did (rclpy's loop skipped that
+    entry, as no handle existed yet). After each execute every goal handle must hold the shadow's
+    status.
     """
 
     def __init__(self, *args: Any, **kwargs: Any) -> None:
@@ -214,6 +237,7 @@ class ShadowedClient(ActionClient):
         self.handles: dict[bytes, Any] = {}
         self.shadow: dict[bytes, int] = {}  # goals whose handle exists and has not finished
         self.final: dict[bytes, int] = {}
+        self.early: dict[bytes, int] = {}  # goals without a handle: their last listed status
         self.sequences: dict[bytes, list[int]] = {}
         self.mismatches: list[str] = []
         self.whole_entries = 0
@@ -239,13 +263,15 @@ class ShadowedClient(ActionClient):
             handle = future.result()
             goal_uuid = bytes(handle.goal_id.uuid)
             self.handles[goal_uuid] = handle
-            self.shadow[goal_uuid] = GoalStatus.STATUS_UNKNOWN
+            self.shadow[goal_uuid] = self.early.pop(goal_uuid, GoalStatus.STATUS_UNKNOWN)
         for status in whole.status_list if whole is not None else []:
             goal_uuid = bytes(status.goal_info.goal_id.uuid)
-            if goal_uuid in self.shadow:
+            if goal_uuid not in self.handles:
+                self.early[goal_uuid] = status.status
+            elif goal_uuid in self.shadow:
                 self.shadow[goal_uuid] = status.status
-                if status.status in _TERMINAL:
-                    self.final[goal_uuid] = self.shadow.pop(goal_uuid)
+        for goal_uuid in [goal for goal, status in self.shadow.items() if status in _TERMINAL]:
+            self.final[goal_uuid] = self.shadow.pop(goal_uuid)
         for goal_uuid, handle in self.handles.items():
             expected = self.shadow.get(goal_uuid, self.final.get(goal_uuid))
             if handle.status != expected:

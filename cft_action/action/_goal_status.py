@@ -19,7 +19,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, NamedTuple, Optional
 
-from action_msgs.msg import GoalStatus
+from action_msgs.msg import GoalInfo, GoalStatus
 from rclpy.serialization import deserialize_message
 
 from cft_action import _rcl
@@ -117,11 +117,6 @@ class OwnGoalStatus:
         if self._table is not None:
             self._table.sending(goal_uuid)
 
-    def responded(self, goal_uuid: bytes, accepted: bool) -> None:
-        """rclpy executed the goal's response: it made the goal handle, or rejected the goal."""
-        if self._table is not None:
-            self._table.responded(goal_uuid, accepted)
-
     def take_into(self, data: dict, ready: bool) -> None:
         """If ``ready``, take one status sample into ``data['status']``, as rclpy's ``take_data``:
         a ``GoalStatusArray`` of this client's entries; nothing when no sample came or it listed
@@ -138,18 +133,27 @@ class OwnGoalStatus:
             # entries < 0: the sample was not plain CDR; it is converted whole, as rclpy does.
             data['status'] = deserialize_message(cdr, self._message_type)
 
-    def executed(self, taken_data: dict, goal_id: Optional[Any]) -> list[bytes]:
+    def executed(self, taken_data: dict, goal_id: Optional[Any]) -> tuple[list[bytes], Any]:
         """rclpy's ``execute`` has run on ``taken_data``: note its goal response, for the goal
-        ``goal_id`` (looked up before, since rclpy forgets it), and return the goals that finished:
-        rejected, or with a terminal status in it."""
-        finished = []
-        if goal_id is not None:
+        ``goal_id`` (looked up before, since rclpy forgets it).
+
+        :return: ``(finished, early)``: the goals that finished (rejected, or with a terminal
+            status in it), and, for a goal accepted now whose status came before its response
+            (which then updated no handle), a ``GoalStatusArray`` with that status for rclpy's
+            ``execute``, else None. The server may never send that status again: under the guard
+            it sends this client only samples that change its goals.
+        """
+        finished, early = [], None
+        if goal_id is not None and self._table is not None:
             accepted = bool(taken_data['goal'][1].accepted)
-            self.responded(bytes(goal_id.uuid), accepted)
+            status = self._table.responded(bytes(goal_id.uuid), accepted)
             if not accepted:
                 finished.append(bytes(goal_id.uuid))
-        status = taken_data.get('status')
-        if status is not None:
-            finished += [bytes(s.goal_info.goal_id.uuid) for s in status.status_list
-                         if s.status in _TERMINAL]
-        return finished
+            elif status is not None:
+                early = self._message_type(status_list=[GoalStatus(
+                    goal_info=GoalInfo(goal_id=goal_id), status=status)])
+        for sample in (taken_data.get('status'), early):
+            if sample is not None:
+                finished += [bytes(s.goal_info.goal_id.uuid) for s in sample.status_list
+                             if s.status in _TERMINAL]
+        return finished, early

@@ -103,6 +103,7 @@ def main() -> None:
         'results': sum(r.done() for r in results),
         # goal handles whose status the status topic did not bring to SUCCEEDED
         'stale_handles': sum(h.status != GoalStatus.STATUS_SUCCEEDED for h in handles),
+        'stale_statuses': [h.status for h in handles if h.status != GoalStatus.STATUS_SUCCEEDED],
         # goal index (in sending order) -> the feedback it got, for the first incomplete goals
         'incomplete': repr({i: ks for i, ks in enumerate(received.values())
                             if ks != list(range(order))})[:400],

@@ -15,7 +15,12 @@
 // - a goal whose request was sent and whose response has not been executed ("pending"): only
 //   when its response was taken with the sample, since rclpy's execute then makes the goal handle
 //   before it reads the status. rclpy takes one goal response per wake, so that is one goal; when
-//   the caller cannot tell which, every pending goal's entry goes.
+//   the caller cannot tell which, every pending goal's entry goes. The status of the last sample
+//   that listed a pending goal is kept: cft_status_table_responded() returns it when the goal is
+//   accepted, so that the new handle gets it. A status that came before the response updates no
+//   handle in rclpy, and the server may send none later that lists the goal with it (a guarded
+//   server sends a client only samples that change its goals; any server, none once the client's
+//   goals and every other goal are done).
 //
 // Goals are added by cft_status_table_sending() before their request is written, and moved from
 // pending by cft_status_table_responded(). A mutex serializes them with cft_status_trim(), since
@@ -62,6 +67,7 @@ struct slot {
   uint8_t state;  // PENDING or ACCEPTED
   int16_t last;   // accepted: the status last delivered, or UNDELIVERED
   int16_t seen;   // accepted: the status in the last sample the reader's filter passed, or UNDELIVERED
+  int16_t early;  // pending: the status in the last sample that listed it, or UNDELIVERED
 };
 
 struct cft_status_table {
@@ -187,26 +193,31 @@ EXPORT int cft_status_table_sending(struct cft_status_table *t, const uint8_t *u
     memcpy(s->uuid, uuid, UUID_SIZE);
     s->used = true;
     s->state = PENDING;
-    s->last = s->seen = UNDELIVERED;
+    s->last = s->seen = s->early = UNDELIVERED;
   }
   pthread_mutex_unlock(&t->lock);
   return ret;
 }
 
 // The goal's response was executed: accepted (its goal handle exists now), or not (forgotten).
-EXPORT void cft_status_table_responded(struct cft_status_table *t, const uint8_t *uuid,
-                                       int accepted) {
+EXPORT int cft_status_table_responded(struct cft_status_table *t, const uint8_t *uuid,
+                                      int accepted) {
+  int early = UNDELIVERED;
   pthread_mutex_lock(&t->lock);
   struct slot *s = find(t, uuid);
   if (s != NULL && s->state == PENDING) {
     if (accepted) {
+      early = s->early;
       s->state = ACCEPTED;
-      s->last = s->seen = UNDELIVERED;
+      // The early status goes to the new handle now: later entries pass when they differ from it.
+      s->last = s->seen = (int16_t)early;
+      if (early != UNDELIVERED && is_terminal((int8_t)early)) erase(t, s);
     } else {
       erase(t, s);
     }
   }
   pthread_mutex_unlock(&t->lock);
+  return early;
 }
 
 static uint32_t read_u32(const uint8_t *p, bool little) {
@@ -231,8 +242,10 @@ static bool deliver(struct cft_status_table *t, const uint8_t *uuid, int8_t stat
                     const uint8_t *responding, bool all_pending) {
   struct slot *s = find(t, uuid);
   if (s == NULL) return false;
-  if (s->state == PENDING)
+  if (s->state == PENDING) {
+    s->early = status;
     return all_pending || (responding != NULL && memcmp(responding, uuid, UUID_SIZE) == 0);
+  }
   if (s->last == status) return false;
   s->last = status;
   if (is_terminal(status)) erase(t, s);
