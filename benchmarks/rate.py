@@ -6,10 +6,12 @@ only, each client's ``rx_bytes`` on its own veth), the publishers run under ``cf
 1. **Bytes.** One publisher of ``--size`` B messages (``std_msgs/String``, serialized size with its
    encapsulation) at ``--hz``, and side by side a subscriber with ``max_rate=--max-rate``, a plain
    subscriber, and a throttle relay (:class:`harness.throttle.ThrottleRelay`, as topic_tools'
-   throttle: a plain subscriber that republishes at ``--max-rate``). Each one's bytes received per
-   second over ``--window`` s. The ideal is ``--max-rate`` messages a second at what one message
-   costs the plain subscriber on the wire (its bytes divided by its messages: Ethernet, IP, UDP,
-   RTPS headers, and its share of heartbeats and discovery).
+   throttle: a plain subscriber that republishes at ``--max-rate``), and a plain subscriber of the
+   relay's output, which receives ``--max-rate`` messages a second as a relay delivers them. Each
+   one's bytes received per second over ``--window`` s. The ideal is ``--max-rate`` messages a
+   second at what one message costs the plain subscriber on the wire (its bytes divided by its
+   messages: Ethernet, IP, UDP, RTPS headers, and its share of heartbeats and discovery); the
+   relay's subscriber pays the same discovery as the rate-limited one, spread over few messages.
 2. **CPU.** The publisher's user + system seconds (``/proc/PID/stat``) per second over
    ``--cpu-window`` s, with 1, 8 and 32 (``--counts``) rate-limited subscribers and with as many
    plain ones, alternating; ``--per-process`` subscribers (each its own participant, rclpy context)
@@ -54,8 +56,9 @@ from harness.report import fmt, markdown_table
 REPO = Path(__file__).resolve().parent.parent
 #: Reliable with a short history, as tests/test_rate_limit.py: filtered readers must not stall.
 DEPTH = 10
-#: The subscriber kinds of part 1, in the order they are started.
-KINDS = ('rate', 'plain', 'relay')
+#: The subscriber kinds of part 1, in the order they are started (``relayed``: of the relay's
+#: output, not of the publisher's topic).
+KINDS = ('rate', 'plain', 'relay', 'relayed')
 
 
 # --- the roles (each runs in a process of its own) ------------------------------------------------
@@ -116,8 +119,9 @@ def publisher(topic: str, hz: float, size: int, tag: int) -> int:
 
 def subscriber(topic: str, kind: str, participants: int, max_rate: float) -> int:
     """``participants`` subscriptions to ``topic`` (each its own rclpy context, hence participant),
-    of ``kind``: ``rate`` (``max_rate``), ``plain``, or ``relay`` (a throttle relay at
-    ``max_rate``). ``stats``: messages each received, CPU seconds, where the filter runs."""
+    of ``kind``: ``rate`` (``max_rate``), ``plain``, ``relay`` (a throttle relay at ``max_rate``),
+    or ``relayed`` (plain, of the relay's output). ``stats``: messages each received, CPU
+    seconds, where the filter runs."""
     import rclpy
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.node import Node
@@ -146,7 +150,8 @@ def subscriber(topic: str, kind: str, participants: int, max_rate: float) -> int
             relays[index] = relay
             states.append(partial(lambda r: f'relay, republished {r.republished}', relay))
         else:
-            node.create_subscription(String, topic, count, _qos())
+            node.create_subscription(String, topic + ('_throttled' if kind == 'relayed' else ''),
+                                     count, _qos())
         executor = SingleThreadedExecutor(context=context)
         executor.add_node(node)
         threading.Thread(target=executor.spin, daemon=True).start()
@@ -271,6 +276,7 @@ def part_bytes(run: Run, pub: Proc, topic: str) -> dict[str, Any]:
     out['rate_to_ideal'] = rate / out['ideal_bytes_per_s']
     out['rate_to_plain'] = rate / plain['rx_bytes_per_s']
     out['rate_to_relay'] = rate / out['kinds']['relay']['rx_bytes_per_s']
+    out['rate_to_relayed'] = rate / out['kinds']['relayed']['rx_bytes_per_s']
     return out
 
 
@@ -278,7 +284,7 @@ def bytes_received(run: Run, pub: Proc, topic: str, kinds: Sequence[str]) -> dic
     """The bytes and messages per second that subscribers of ``kinds`` receive, side by side."""
     args = run.args
     subs = {kind: run.start(kind, 'subscriber', topic, kind, 1, args.max_rate) for kind in kinds}
-    _matched(pub, len(kinds))
+    _matched(pub, sum(kind != 'relayed' for kind in kinds))
     time.sleep(args.warmup)
     before = {k: (netns.interface_counters(p.pid), p.request_json('stats', 'STATS'))
               for k, p in subs.items()}
@@ -373,13 +379,14 @@ def markdown(results: dict[str, Any]) -> str:
         out += markdown_table(
             ['subscriber', 'B/s received', 'messages/s', 'filtered in'],
             [[f"`max_rate={args['max_rate']:g}`" if k == 'rate' else
-              ('throttle relay' if k == 'relay' else 'plain'),
+              {'relay': 'throttle relay', 'relayed': "the relay's subscriber"}.get(k, 'plain'),
               f"{kinds[k]['rx_bytes_per_s']:,.0f}", f"{kinds[k]['messages_per_s']:.1f}",
               kinds[k]['filtered_in']] for k in KINDS], ['---', '---:', '---:', '---'])
         out.append(f"\nideal {args['max_rate']:g} x {part['bytes_per_message_plain']:.0f} B = "
                    f"{part['ideal_bytes_per_s']:,.0f} B/s; rate-limited / ideal "
                    f"{part['rate_to_ideal']:.2f}, / plain {part['rate_to_plain']:.4f}, / relay "
-                   f"{part['rate_to_relay']:.4f}\n")
+                   f"{part['rate_to_relay']:.4f}, / the relay's subscriber "
+                   f"{fmt(part.get('rate_to_relayed'), '.2f')}\n")
     alone = results.get('bytes_alone')
     if alone:
         mine = alone['kinds']['rate']
