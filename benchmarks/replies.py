@@ -17,13 +17,12 @@ from __future__ import annotations
 
 import argparse
 import json
-import platform
 import statistics
 import sys
 from typing import Any
 
 from harness.cli import int_list
-from harness.report import markdown_table
+from harness.report import add_results_arguments, markdown_only, markdown_table, results_start
 from tests.test_replies import ports, replies_on_the_wire
 
 #: The issue's clients: three of the library's (default mode) and one plain, 3 goals each.
@@ -47,28 +46,41 @@ def measure(config: str, result_pad: int) -> dict[str, Any]:
             'results': [report['results'] for report in run.reports]}
 
 
+def markdown(result: dict[str, Any]) -> str:
+    """The table of a results file: per result size and server, the replies and bytes each
+    client received, and the server's CPU per goal."""
+    rows = []
+    for pad in result['result_pads']:
+        for config in result['configs']:
+            mine = [r for r in result['runs'] if r['config'] == config and r['result_pad'] == pad]
+            rows.append([f'{4 * pad + 4} B', config,
+                         ' / '.join(str(r['replies']) for r in mine),
+                         f"{statistics.median(b for r in mine for b in r['bytes']):,.0f}",
+                         f"{statistics.median(r['server_cpu_ms_per_goal'] for r in mine):.2f}"])
+    return '\n'.join(markdown_table(['result', 'server', 'replies per client (each run)',
+                                     'reply bytes per client (median)',
+                                     'server CPU ms per goal (median)'], rows))
+
+
 def main(argv: list[str]) -> None:
     parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
     parser.add_argument('--rounds', type=int, default=3)
     parser.add_argument('--result-pads', type=int_list, default=[0, 25000],
                         help='int32 elements appended to each result')
     parser.add_argument('--unguarded', action='store_true', help='also a server without the guard')
+    add_results_arguments(parser)
     args = parser.parse_args(argv)
+    if markdown_only(args, markdown):
+        return
+    output, header = results_start('replies', args.out, argv)
     configs = [c for c in CONFIGS if args.unguarded or c != 'unguarded']
-    runs = [measure(config, pad) for _ in range(args.rounds) for pad in args.result_pads
-            for config in configs]
-    print(json.dumps({'host': platform.node(), 'clients': CLIENTS, 'runs': runs}))
-    rows = []
-    for pad in args.result_pads:
-        for config in configs:
-            mine = [r for r in runs if r['config'] == config and r['result_pad'] == pad]
-            rows.append([f'{4 * pad + 4} B', config,
-                         ' / '.join(str(r['replies']) for r in mine),
-                         f"{statistics.median(b for r in mine for b in r['bytes']):,.0f}",
-                         f"{statistics.median(r['server_cpu_ms_per_goal'] for r in mine):.2f}"])
-    print('\n'.join(markdown_table(['result', 'server', 'replies per client (each run)',
-                          'reply bytes per client (median)', 'server CPU ms per goal (median)'],
-                         rows)))
+    result = {**header, 'clients': CLIENTS, 'configs': configs, 'result_pads': args.result_pads,
+              'runs': [measure(config, pad) for _ in range(args.rounds)
+                       for pad in args.result_pads for config in configs]}
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_text(json.dumps(result, indent=1))
+    print(markdown(result))
+    print(f'results: {output}')
 
 
 if __name__ == '__main__':
