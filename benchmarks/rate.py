@@ -7,7 +7,9 @@ only, each client's ``rx_bytes`` on its own veth), the publishers run under ``cf
    encapsulation) at ``--hz``, and side by side a subscriber with ``max_rate=--max-rate``, a plain
    subscriber, and a throttle relay (:class:`harness.throttle.ThrottleRelay`, as topic_tools'
    throttle: a plain subscriber that republishes at ``--max-rate``), and a plain subscriber of the
-   relay's output, which receives ``--max-rate`` messages a second as a relay delivers them. Each
+   output of a second relay, which runs beside the publisher (as a throttle on the robot serves a
+   GUI on a thin link; the clients' namespaces cannot reach each other): it receives
+   ``--max-rate`` messages a second as a relay delivers them. Each
    one's bytes received per second over ``--window`` s. The ideal is ``--max-rate`` messages a
    second at what one message costs the plain subscriber on the wire (its bytes divided by its
    messages: Ethernet, IP, UDP, RTPS headers, and its share of heartbeats and discovery); the
@@ -56,8 +58,8 @@ from harness.report import fmt, markdown_table
 REPO = Path(__file__).resolve().parent.parent
 #: Reliable with a short history, as tests/test_rate_limit.py: filtered readers must not stall.
 DEPTH = 10
-#: The subscriber kinds of part 1, in the order they are started (``relayed``: of the relay's
-#: output, not of the publisher's topic).
+#: The subscriber kinds of part 1, in the order they are started (``relayed``: of the output of a
+#: relay in the publisher's namespace, not of the publisher's topic).
 KINDS = ('rate', 'plain', 'relay', 'relayed')
 
 
@@ -283,8 +285,12 @@ def part_bytes(run: Run, pub: Proc, topic: str) -> dict[str, Any]:
 def bytes_received(run: Run, pub: Proc, topic: str, kinds: Sequence[str]) -> dict[str, Any]:
     """The bytes and messages per second that subscribers of ``kinds`` receive, side by side."""
     args = run.args
+    relayed = 'relayed' in kinds
+    if relayed:  # the relay it subscribes to, beside the publisher
+        run.start('relay beside the publisher', 'subscriber', topic, 'relay', 1, args.max_rate,
+                  server=True)
     subs = {kind: run.start(kind, 'subscriber', topic, kind, 1, args.max_rate) for kind in kinds}
-    _matched(pub, sum(kind != 'relayed' for kind in kinds))
+    _matched(pub, len(kinds))  # the relayed subscriber's relay in its place
     time.sleep(args.warmup)
     before = {k: (netns.interface_counters(p.pid), p.request_json('stats', 'STATS'))
               for k, p in subs.items()}
