@@ -98,20 +98,27 @@ def data_sequence_numbers(payload: bytes) -> list[tuple[bytes, int]]:
             if kind == _DATA]
 
 
-def _signatures(body: bytes, order: str) -> Optional[int]:
-    """The number of filter signatures in the inline QoS of one DATA or DATA_FRAG submessage body,
-    or None when it has no ``PID_CONTENT_FILTER_INFO``."""
+def _inline_qos(body: bytes, order: str) -> Iterator[tuple[int, int, int]]:
+    """(parameter id, offset of its value, its length) of each inline QoS parameter of one DATA or
+    DATA_FRAG submessage body, up to and with the sentinel."""
     at = 4 + struct.unpack(order + 'H', body[2:4])[0]  # octetsToInlineQos counts from there
     while at + 4 <= len(body):
         pid, length = struct.unpack(order + 'HH', body[at:at + 4])
+        yield pid, at + 4, length
         if pid == _PID_SENTINEL:
-            return None
+            return
+        at += 4 + length
+
+
+def _signatures(body: bytes, order: str) -> Optional[int]:
+    """The number of filter signatures in the inline QoS of one DATA or DATA_FRAG submessage body,
+    or None when it has no ``PID_CONTENT_FILTER_INFO``."""
+    for pid, at, _ in _inline_qos(body, order):
         if pid & 0x3fff == _PID_CONTENT_FILTER_INFO:
             # filterResult: sequence<long> of bitmaps, then filterSignatures: sequence<long[4]>.
-            bitmaps = struct.unpack(order + 'I', body[at + 4:at + 8])[0]
-            start = at + 8 + 4 * bitmaps
+            bitmaps = struct.unpack(order + 'I', body[at:at + 4])[0]
+            start = at + 4 + 4 * bitmaps
             return int(struct.unpack(order + 'I', body[start:start + 4])[0])
-        at += 4 + length
     return None
 
 
@@ -288,11 +295,8 @@ def _serialized(body: bytes, flags: int, order: str) -> bytes:
     """The serialized payload (from its encapsulation header on) of one DATA submessage body."""
     at = 4 + struct.unpack(order + 'H', body[2:4])[0]  # octetsToInlineQos counts from there
     if flags & 0x02:  # Q: an inline QoS parameter list, up to its sentinel
-        while at + 4 <= len(body):
-            pid, length = struct.unpack(order + 'HH', body[at:at + 4])
-            at += 4 + length
-            if pid == _PID_SENTINEL:
-                break
+        for _, value, length in _inline_qos(body, order):
+            at = value + length
     return body[at:] if flags & 0x04 else b''  # D: the submessage carries data
 
 

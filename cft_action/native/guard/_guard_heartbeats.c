@@ -54,7 +54,6 @@
 #define PIGGYBACK_CALLER SW_PREFIX "29send_heartbeat_piggyback_nts_"
 #define DELIVER_CALLER SW_PREFIX "25deliver_sample_to_network"
 
-
 enum { NARROWED = 0, WIDENED = 1, GAPS_DEFERRED = 2, GAPS_PASSED = 3, COUNTERS = 4 };
 static unsigned long counters[COUNTERS];
 
