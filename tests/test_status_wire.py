@@ -95,15 +95,20 @@ MIXED = (('client', 3, 5), ('goals', 3, 5), ('off', 3, 5), ('rclpy', 3, 5))
 def test_each_client_receives_the_status_samples_of_its_own_goals() -> None:
     """Under the guard: the plain client receives every status sample the server wrote, each of
     the library's clients (every feedback filter mode) a subset of them, each changing one of its
-    own goals or owed, none carries a filter signature, and every goal handle of every client ends
+    own goals or owed, the guard withholds some (after the held goals' quiet every reader has
+    acknowledged, so the first sample of the release is withheld from the clients whose goals it
+    does not change), none carries a filter signature, and every goal handle of every client ends
     SUCCEEDED."""
     run = status_on_the_wire(MIXED)
     assert_no_stale_handle(run, MIXED)
     assert_own_or_owed(run, MIXED)
     plain, *filtered = status_samples(run)
     assert len(filtered) == len(MIXED) - 1, run.captured.keys()
+    # A subset: how much smaller depends on how fast each reader acknowledges (a reader that has not
+    # acknowledged its last sample is owed the next one), which load slows (CI once saw a client of
+    # the library get all 36, every one its own change or owed). assert_own_or_owed is the rule.
     for samples in filtered:
-        assert samples < plain, (len(samples), len(plain))
+        assert samples <= plain, (len(samples), len(plain))
     assert all(set(seen.samples.values()) == {None} for seen in run.captured.values())
     status = run.stats_after['guard_status']
     assert status['verdicts'] > 0 and status['withheld'] > 0, status
