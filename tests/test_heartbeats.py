@@ -4,7 +4,7 @@ sample that is not theirs (cft_action/native/guard/_guard_heartbeats.c).
 A keep-last-10 writer's history is nearly always full, and Fast DDS 2.14 then heartbeats every
 reader at each write: a filtered reader, which gets none of the DATA, receives a HEARTBEAT of its
 own per write. The guard keeps that HEARTBEAT with the DATA, to the DATA's readers
-(``CFT_GUARD_HEARTBEAT_ALL_MS``, default ``never``).
+(``CFT_GUARD_HEARTBEAT_ALL_MS``, default ``never``; a status writer's every 10 ms).
 On the wire (UDP only, captured on loopback as in tests/test_signatures.py): each filtered reader
 gets no more lone HEARTBEATs than the guard let through, and exactly its own feedback; the plain
 reader beside them gets every sample.
@@ -35,7 +35,6 @@ def test_a_full_history_sends_filtered_readers_no_heartbeat_per_foreign_write() 
     before, after = run.stats_at_go['guard_heartbeats'], run.stats_after['guard_heartbeats']
     counts = {k: after[k] - before[k] for k in after}
     assert counts['narrowed'] > 0, counts  # the history was full, and the guard narrowed it
-    assert counts['widened'] == 0, counts  # CFT_GUARD_HEARTBEAT_ALL_MS=never, the default
     # The port of each client's participant: the plain one got DATA for every write.
     captured = run.captured
     writes = GOALS * ORDER * len(clients)
@@ -45,4 +44,5 @@ def test_a_full_history_sends_filtered_readers_no_heartbeat_per_foreign_write() 
     assert plain['data'] >= writes, captured
     for _, datagrams in filtered:
         assert datagrams['data'] <= GOALS * ORDER + SLACK, captured  # own samples, and repairs
-        assert datagrams['heartbeat'] <= counts['widened'] + SLACK, (captured, counts)
+        # never widened for the feedback writer (the status writer's widenings are in the counts)
+        assert datagrams['heartbeat'] <= SLACK, (captured, counts)

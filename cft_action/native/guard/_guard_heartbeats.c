@@ -15,7 +15,10 @@
 //    is full (a keep-last-10 writer nearly always is), when acknowledgements lag, or when its byte
 //    budget is spent. The definition of select_all_readers_nts below keeps that HEARTBEAT with the
 //    DATA, to the DATA's readers (CFT_GUARD_HEARTBEAT_ALL_MS: `never`, the default; a number of ms
-//    lets the widening through at most that often per writer; `off`: always). A reader the DATA
+//    lets the widening through at most that often per writer; `off`: always). By default a status
+//    writer's (a write on which a kept status reader was judged) goes through at most once per
+//    STATUS_HEARTBEAT_ALL_MS: its readers' acknowledgements end the guard's owed chains (N = 16
+//    clients x 4 goals: 57 status samples per client with it, 169 without, of 192). A reader the DATA
 //    is not for learns the writer's range from the personal GAP and HEARTBEAT before its next DATA
 //    and from the periodic heartbeat, which every other caller of select_all_readers_nts sends and
 //    which goes through. A writer without filtered readers has every reader selected already, so
@@ -43,6 +46,7 @@
 
 #include "_guard.h"
 #include "_guard_log.h"
+#include "_guard_status.h"
 
 #define FASTDDS2_SONAME "libfastrtps.so.2.14"
 #define SW_PREFIX "_ZN8eprosima8fastrtps4rtps14StatefulWriter"
@@ -107,6 +111,7 @@ static int caller_of(uintptr_t address) {
 // from the piggyback; "never" (the default): none; "off": as Fast DDS. -1 when off, NEVER when
 // never, else nanoseconds.
 #define NEVER LONG_MAX
+#define STATUS_HEARTBEAT_ALL_MS 10
 static long heartbeat_all_ns(void) {
   static long interval = -2;  // -2: not read yet
   long v = __atomic_load_n(&interval, __ATOMIC_RELAXED);
@@ -178,6 +183,7 @@ CFT_EXPORT void cft_select_all_readers_nts2(void *self, void *group, void *locat
     __asm__(SELECT_ALL);
 void cft_select_all_readers_nts2(void *self, void *group, void *locator_selector) {
   long interval = heartbeat_all_ns();
+  if (interval == NEVER && cft_status_write_now()) interval = STATUS_HEARTBEAT_ALL_MS * 1000000L;
   if (interval >= 0 && caller_of((uintptr_t)__builtin_return_address(0)) == PIGGYBACK) {
     if (interval == NEVER || !widening_due((uintptr_t)self, interval)) {
       count(NARROWED);

@@ -304,10 +304,13 @@ void cft_status_frame_open(struct cft_status_frame *f) {
   f->outer = frame;
   f->count = 0;
   f->overflow = false;
+  f->judged = false;
   frame = f;
 }
 
 void cft_status_frame_close(struct cft_status_frame *f) { frame = f->outer; }
+
+bool cft_status_write_now(void) { return frame != NULL && frame->judged; }
 
 static bool owed(void) {
   if (frame == NULL || asking == NULL) return false;
@@ -387,6 +390,7 @@ static __thread size_t mine_capacity;
 bool cft_status_verdict(void **program, const void *payload, const void *reader_guid) {
   struct record *r = *program;
   count(VERDICTS);
+  if (frame != NULL) frame->judged = true;
   bool is_owed = owed();
   uint32_t length, n = 0;
   bool little;

@@ -36,9 +36,15 @@ struct cft_status_frame {
   struct cft_status_frame *outer;  // a write nested in this one's (statistics writers)
   int count;
   bool overflow;                   // more than CFT_STATUS_FRAME_READERS: every reader is owed
+  bool judged;                     // a kept status reader's verdict ran in this write
   const void *readers[CFT_STATUS_FRAME_READERS];  // ReaderProxy objects, compared, never read
 };
 void cft_status_frame_open(struct cft_status_frame *frame);
 void cft_status_frame_close(struct cft_status_frame *frame);
+
+// Whether the write running on this thread is one whose change a kept status reader was judged
+// on (a status writer's): _guard_heartbeats.c heartbeats all its readers, as their
+// acknowledgements end the owed chains.
+bool cft_status_write_now(void);
 
 #endif  // CFT_ACTION_GUARD_STATUS_H_
