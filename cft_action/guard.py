@@ -234,9 +234,10 @@ def heartbeat_counts() -> dict[str, int]:
     default keep-last 10 nearly always is), and 2.14.6 also sends each filtered reader a GAP at
     each write it is not in: a datagram per sample to readers that receive none of it. The guard
     keeps that HEARTBEAT with the DATA, to the DATA's readers (``CFT_GUARD_HEARTBEAT_ALL_MS``:
-    ``never``, the default; a number of ms lets it through to all readers at most that often per
-    writer; ``off``: as Fast DDS), and leaves those GAPs to the reader's next
-    sample, NACK or periodic heartbeat (``CFT_GUARD_DEFER_GAPS=0``: as Fast DDS). Keys:
+    ``never``, the default, but for a status writer's every 10 ms; a number of ms lets it through
+    to all readers at most that often per writer; ``off``: as Fast DDS), and leaves those GAPs
+    to the reader's next sample, NACK or periodic heartbeat (``CFT_GUARD_DEFER_GAPS=0``: as Fast
+    DDS). Keys:
 
     - ``narrowed``: piggyback HEARTBEATs that went to the DATA's readers only;
     - ``widened``: those let through to all readers;
