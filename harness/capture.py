@@ -282,12 +282,12 @@ def samples_by_port(interface: str, writers: set[bytes], stop: threading.Event,
         seen = found.setdefault(port, PortTraffic({}, 0, 0, {}))
         found[port] = seen._replace(octets=seen.octets + len(payload),
                                     resent_octets=seen.resent_octets + again * len(payload))
-        for writer, sequence, signatures in filter_signatures(payload):
-            if writer in writers:
-                seen.samples[(writer, sequence)] = signatures
         for kind, flags, order, body, writer, sequence in _samples(payload):
-            if kind == _DATA and writer in writers:
-                seen.payloads[(writer, sequence)] = _serialized(body, flags, order)
+            if writer in writers:  # signatures as filter_signatures reads them (Q: inline QoS)
+                signatures = _signatures(body, order) if flags & 0x02 else None
+                seen.samples[(writer, sequence)] = signatures
+                if kind == _DATA:
+                    seen.payloads[(writer, sequence)] = _serialized(body, flags, order)
     return found
 
 
