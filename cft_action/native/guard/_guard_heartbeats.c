@@ -18,7 +18,7 @@
 //    lets the widening through at most that often per writer; `off`: always). By default a status
 //    writer's (a write on which a kept status reader was judged) goes through at most once per
 //    STATUS_HEARTBEAT_ALL_MS: its readers' acknowledgements end the guard's owed chains (N = 16
-//    clients x 4 goals: 57 status samples per client with it, 169 without, of 192). A reader the DATA
+//    clients x 4 goals: 58 status samples per client with it, 169 without, of 192). A reader the DATA
 //    is not for learns the writer's range from the personal GAP and HEARTBEAT before its next DATA
 //    and from the periodic heartbeat, which every other caller of select_all_readers_nts sends and
 //    which goes through. A writer without filtered readers has every reader selected already, so
