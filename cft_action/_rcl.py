@@ -201,6 +201,11 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'rcl_subscription_is_cft_enabled': (_rcl, ctypes.c_bool, [_void_p], None),
     'rcl_subscription_is_valid': (_rcl, ctypes.c_bool, [_void_p], None),
     'rcl_subscription_get_topic_name': (_rcl, ctypes.c_char_p, [_void_p], None),
+    'rcl_publisher_get_rmw_handle': (_rcl, _void_p, [_void_p], None),
+    # rmw's, found through librcl's dependencies (the wheels link rmw_fastrtps_cpp, apt's
+    # rmw_implementation)
+    'rmw_get_gid_for_publisher':
+        (_rcl, _rcl_ret_t, [_void_p, ctypes.POINTER(_Gid)], _check_rcutils_ret),
     'rcl_action_client_is_valid': (_rcl_action, ctypes.c_bool, [_void_p], None),
     'rcl_client_is_valid': (_rcl, ctypes.c_bool, [_void_p], None),
     'rcl_client_get_service_name': (_rcl, ctypes.c_char_p, [_void_p], None),
@@ -437,6 +442,16 @@ def writer_filters(gid: bytes) -> Optional[bool]:
     if _lib.cft_writer_is_marked(bytes(gid)[:16]):
         return True
     return False if _WRITER_MARKS_COMPLETE else None
+
+
+def publisher_gid(publisher: int) -> bytes:
+    """The GID of the publisher at this ``rcl_publisher_t *`` (its DataWriter's GUID)."""
+    rmw_publisher = _lib.rcl_publisher_get_rmw_handle(publisher)
+    if not rmw_publisher:
+        raise RCLError(f'rcl_publisher_get_rmw_handle returned NULL: {take_rcl_error()}')
+    gid = _Gid()
+    _lib.rmw_get_gid_for_publisher(rmw_publisher, ctypes.byref(gid))
+    return bytes(gid.data)
 
 
 def reader_filter_class(gid: bytes) -> Optional[str]:

@@ -249,6 +249,24 @@ def heartbeat_counts() -> dict[str, int]:
     return _counters('cft_guard_heartbeat_count', HEARTBEAT_COUNTERS)
 
 
+def closed_readers(writer_gid: bytes) -> Optional[int]:
+    """Return how many readers matched by this process's writer ``writer_gid`` (16 bytes) a
+    message written now would not reach because of the library's rate and poll filters: a rate
+    window still closed, a poll with no message left.
+
+    None when the guard is not preloaded, or does not keep its writers' filters (a Fast DDS other
+    than 2.14).
+    """
+    process = _preloaded()
+    if process is None:
+        return None
+    closed = process.cft_guard_closed_readers
+    closed.argtypes = [ctypes.c_char_p]
+    closed.restype = ctypes.c_int
+    count = closed(bytes(writer_gid)[:16])
+    return None if count < 0 else count
+
+
 #: The counters of cft_guard_reply_count() in _guard_replies.c, in its order.
 REPLY_COUNTERS = ('marked', 'withheld', 'passed', 'implausible', 'full')
 

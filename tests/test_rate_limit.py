@@ -122,6 +122,38 @@ def test_max_rate_can_be_lifted_at_run_time(ros, publishers):
         assert len(second) >= 0.9 * SOURCE_HZ, (base, len(second), per_publisher(received))
 
 
+@pytest.mark.parametrize('mode', ['guarded', 'unguarded'])
+def test_active_subscription_count_is_exact_under_the_guard(ros, mode):
+    """A publisher with three subscriptions, polled, rate-limited and plain: under the guard it
+    counts only those that would take a message published now; elsewhere the matched count."""
+    prefix = '/' + unique_name('cft_active')
+    child = helper_process('tests.helpers.publisher', [prefix, 10],
+                           env=guard.environment() if mode == 'guarded' else None)
+    try:
+        polled, received = subscribe(ros, prefix + '/ints', poll=0)
+        subscribe(ros, prefix + '/ints', max_rate=0.05)  # one message per 20 s
+        ros.node.create_subscription(Int32, prefix + '/ints', lambda m: None, QOS)
+        assert child.request('wait ints 3', 'MATCHED') == 'MATCHED'
+
+        def active():
+            return tuple(int(n) for n in child.request('active ints', 'ACTIVE').split()[1:])
+
+        def settles_at(wanted):  # a poll reaches the writer by discovery
+            return ros.spin_until(lambda: active() == (wanted, 3), timeout=10)
+
+        guarded = mode == 'guarded'
+        assert active() == (2 if guarded else 3, 3)  # the poll has nothing left
+        assert child.request('burst 1', 'SENT') == 'SENT 1'
+        assert settles_at(1 if guarded else 3)  # and the rate window is now closed
+        poll(polled, 1)
+        assert settles_at(2 if guarded else 3)
+        assert child.request('burst 1', 'SENT') == 'SENT 1'
+        assert ros.spin_until(lambda: len(received) == 1, timeout=10), received
+        assert active() == (1 if guarded else 3, 3)
+    finally:
+        child.stop()
+
+
 @pytest.mark.parametrize('rate, message', [
     ({'max_rate': 0}, 'max_rate=0'), ({'max_rate': -1.0}, 'max_rate=-1.0'),
     ({'max_rate': math.nan}, 'max_rate=nan'), ({'max_rate': 'fast'}, "max_rate='fast'"),

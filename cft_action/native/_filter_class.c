@@ -57,6 +57,12 @@ static void *node_compile(const char *expression) { return cft_node_compile(expr
 // the loaded library's: the sample is passed, as to a plain reader, and counted.
 static unsigned long rate_layout_mismatches;
 
+static int64_t monotonic_ns(void) {
+  struct timespec now;
+  clock_gettime(CLOCK_MONOTONIC, &now);
+  return (int64_t)now.tv_sec * 1000000000 + now.tv_nsec;
+}
+
 static void *rate_compile(const char *expression) {
   return CFT_LAYOUT_KNOWN ? cft_rate_compile(expression) : NULL;
 }
@@ -72,9 +78,7 @@ static bool rate_decide(void *program, const void *payload, const void *sample_i
     __atomic_fetch_add(&rate_layout_mismatches, 1, __ATOMIC_RELAXED);
     return true;
   }
-  struct timespec now;
-  clock_gettime(CLOCK_MONOTONIC, &now);
-  return cft_rate_decide(program, writer, (int64_t)now.tv_sec * 1000000000 + now.tv_nsec);
+  return cft_rate_decide(program, writer, monotonic_ns());
 #else
   (void)program, (void)payload, (void)sample_info;
   return true;
@@ -87,10 +91,14 @@ unsigned long cft_rate_layout_mismatches(void) {
 
 static void rate_carry(void *program, const void *replaced) { cft_rate_carry(program, replaced); }
 
+static bool rate_open(const void *program, const uint8_t *writer_guid) {
+  return cft_rate_open(program, writer_guid, monotonic_ns());
+}
+
 static const struct cft_filter_grammar uuid_grammar = {uuid_compile, uuid_matches, NULL, NULL};
 static const struct cft_filter_grammar node_grammar = {node_compile, node_matches, NULL, NULL};
 static const struct cft_filter_grammar rate_grammar = {rate_compile, NULL, rate_decide,
-                                                       rate_carry};
+                                                       rate_carry, rate_open};
 
 // Of every filter of this library: verdicts, and filters created or changed (each is a filter
 // event at a writer or a reader of this process).
@@ -104,7 +112,15 @@ struct filter {
   pthread_rwlock_t lock;  // the program may be replaced while a receive thread evaluates
   void *program;
   unsigned long verdicts;
+  // A filter at a writer of this process, of a class with `open` (cft_filter_at_writer): the
+  // writer's GUID, in the list of writer_filters.
+  bool listed;
+  uint8_t writer[16];
+  struct filter *prev, *next;
 };
+
+static pthread_mutex_t writer_filters_lock = PTHREAD_MUTEX_INITIALIZER;
+static struct filter *writer_filters;
 
 static bool filter_evaluate(const struct filter *self, const void *payload,
                             const void *sample_info, const void *reader_guid) {
@@ -170,6 +186,13 @@ static uint32_t factory_delete(const struct factory *self, const char *class_nam
   (void)self, (void)class_name;
   struct filter *filter = filter_instance;
   if (filter == NULL) return RETCODE_BAD_PARAMETER;
+  pthread_mutex_lock(&writer_filters_lock);
+  if (filter->listed) {
+    if (filter->prev != NULL) filter->prev->next = filter->next;
+    else writer_filters = filter->next;
+    if (filter->next != NULL) filter->next->prev = filter->prev;
+  }
+  pthread_mutex_unlock(&writer_filters_lock);
   pthread_rwlock_destroy(&filter->lock);
   free(filter->program);
   free(filter);
@@ -232,6 +255,34 @@ bool cft_filter_class_compiles(const char *class_name, const char *expression) {
       i < 0 || expression == NULL ? NULL : classes[i].factory->grammar->compile(expression);
   free(program);
   return program != NULL;
+}
+
+void cft_filter_at_writer(void *instance, const uint8_t *writer_guid) {
+  struct filter *filter = instance;
+  if (filter->grammar->open == NULL) return;
+  pthread_mutex_lock(&writer_filters_lock);
+  if (!filter->listed) {
+    memcpy(filter->writer, writer_guid, 16);
+    filter->listed = true;
+    filter->prev = NULL;
+    filter->next = writer_filters;
+    if (writer_filters != NULL) writer_filters->prev = filter;
+    writer_filters = filter;
+  }
+  pthread_mutex_unlock(&writer_filters_lock);
+}
+
+int cft_filter_class_closed(const uint8_t *writer_guid) {
+  int closed = 0;
+  pthread_mutex_lock(&writer_filters_lock);
+  for (struct filter *filter = writer_filters; filter != NULL; filter = filter->next) {
+    if (memcmp(filter->writer, writer_guid, 16) != 0) continue;
+    pthread_rwlock_rdlock(&filter->lock);
+    closed += !filter->grammar->open(filter->program, writer_guid);
+    pthread_rwlock_unlock(&filter->lock);
+  }
+  pthread_mutex_unlock(&writer_filters_lock);
+  return closed;
 }
 
 unsigned long cft_filter_verdicts(const void *filter) {

@@ -26,6 +26,7 @@
 #define CFT_ACTION_FILTER_CLASS_H_
 
 #include <stdbool.h>
+#include <stdint.h>
 
 #define CFT_UUID_CLASS "CFT_ACTION_UUID"
 #define CFT_NODE_CLASS "CFT_ACTION_NODE"
@@ -43,13 +44,15 @@
 // A class's grammar: how an expression compiles to a program (one malloc'd block, or NULL outside
 // the grammar), and a program's verdict on a serialized sample (a SerializedPayload_t *). A class
 // whose verdict has state gives `decide` instead of `matches`, with the sample's
-// IContentFilter::FilterSampleInfo, and `carry`, which moves the state of the program an update
-// replaces into the new one; its filter's lock is then taken exclusively for each verdict.
+// IContentFilter::FilterSampleInfo, `carry`, which moves the state of the program an update
+// replaces into the new one (its filter's lock is then taken exclusively for each verdict), and
+// `open`: whether a sample of the writer whose GUID is given would pass now.
 struct cft_filter_grammar {
   void *(*compile)(const char *expression);
   bool (*matches)(const void *program, const void *payload);
   bool (*decide)(void *program, const void *payload, const void *sample_info);
   void (*carry)(void *program, const void *replaced);
+  bool (*open)(const void *program, const uint8_t *writer_guid);
 };
 
 // What the library that links this file decides about the filters of its process: whether a
@@ -91,6 +94,14 @@ bool cft_filter_class_compiles(const char *class_name, const char *expression);
 // How many samples the rate class passed because their writer's GUID did not look like one (the
 // layout of the headers is not the loaded library's); 0 on every stack it was tested on.
 unsigned long cft_rate_layout_mismatches(void);
+
+// A filter that a writer of this process keeps for a reader (the owner's `created`, inside the
+// writer's process_reader_filter_info): `writer_guid` (16 bytes) is that writer's. Filters of a
+// class with `open` are listed, until deleted, for cft_filter_class_closed.
+void cft_filter_at_writer(void *filter, const uint8_t *writer_guid);
+// How many of the filters listed for the writer `writer_guid` would not pass a sample of it
+// written now: the matched readers that such a sample would not reach.
+int cft_filter_class_closed(const uint8_t *writer_guid);
 
 // How many verdicts `filter` has given since it was created.
 unsigned long cft_filter_verdicts(const void *filter);

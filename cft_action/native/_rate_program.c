@@ -47,9 +47,15 @@ struct rate_program *cft_rate_compile(const char *expression) {
   return p;
 }
 
-static struct rate_writer *writer_of(struct rate_program *p, const uint8_t *guid) {
+static const struct rate_writer *known_writer(const struct rate_program *p, const uint8_t *guid) {
   for (int i = 0; i < p->writers; i++)
     if (memcmp(p->writer[i].guid, guid, 16) == 0) return &p->writer[i];
+  return NULL;
+}
+
+static struct rate_writer *writer_of(struct rate_program *p, const uint8_t *guid) {
+  const struct rate_writer *known = known_writer(p, guid);
+  if (known != NULL) return (struct rate_writer *)known;
   if (p->writers == RATE_WRITERS) return NULL;
   struct rate_writer *w = &p->writer[p->writers++];
   memcpy(w->guid, guid, 16);
@@ -58,11 +64,23 @@ static struct rate_writer *writer_of(struct rate_program *p, const uint8_t *guid
   return w;
 }
 
+// Whether writer `w`'s next sample at `now_ns` passes.
+static bool writer_open(const struct rate_program *p, const struct rate_writer *w, int64_t now_ns) {
+  if (p->polling && w->remaining == 0) return false;
+  return !(p->period_ns > 0 && w->passed && now_ns < w->next_ns);
+}
+
+bool cft_rate_open(const struct rate_program *p, const uint8_t *writer_guid, int64_t now_ns) {
+  const struct rate_writer *w = known_writer(p, writer_guid);
+  // a writer first seen gets the last poll's count; one beyond the table is passed unfiltered
+  if (w == NULL) return p->writers == RATE_WRITERS || !p->polling || p->last > 0;
+  return writer_open(p, w, now_ns);
+}
+
 bool cft_rate_decide(struct rate_program *p, const uint8_t *writer_guid, int64_t now_ns) {
   struct rate_writer *w = writer_of(p, writer_guid);
   if (w == NULL) return true;
-  if (p->polling && w->remaining == 0) return false;
-  if (p->period_ns > 0 && w->passed && now_ns < w->next_ns) return false;
+  if (!writer_open(p, w, now_ns)) return false;
   w->passed = true;
   w->next_ns = now_ns + p->period_ns;
   if (p->polling) w->remaining--;

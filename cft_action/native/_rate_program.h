@@ -24,6 +24,9 @@ struct rate_program *cft_rate_compile(const char *expression);
 // at `now_ns` (CLOCK_MONOTONIC); updates the writer's state. Not thread-safe: the caller holds
 // the filter's lock exclusively.
 bool cft_rate_decide(struct rate_program *p, const uint8_t *writer_guid, int64_t now_ns);
+// Whether a sample of that writer at `now_ns` would pass, without deciding it (no state changes).
+// The caller holds the filter's lock, shared at least.
+bool cft_rate_open(const struct rate_program *p, const uint8_t *writer_guid, int64_t now_ns);
 // Give `to` (a program compiled from an update) the writers' state of `from`, the program it
 // replaces: their last passes, and their poll counts grown by what the update polled.
 void cft_rate_carry(struct rate_program *to, const struct rate_program *from);

@@ -33,7 +33,7 @@ from rclpy.node import Node
 from rclpy.publisher import Publisher
 from rclpy.subscription import Subscription
 
-from cft_action import _rcl
+from cft_action import _rcl, guard
 from cft_action.errors import ContentFilterError, InvalidArgumentError
 from cft_action.topics._filtered_reader import apply_filter
 
@@ -259,9 +259,16 @@ def rate_filter_state(subscription: Subscription, node: Node) -> RateFilterState
 def active_subscription_count(publisher: Publisher) -> int:
     """How many matched subscriptions would take a message published now.
 
-    On Jazzy, a publisher cannot ask its writer which readers' rate windows are open or polls have
-    messages left, so this is the matched count (``publisher.get_subscription_count()``): an
-    upper bound. A count of 0 is exact: nothing would take the message, and the work of making it
-    can be skipped.
+    In a process under the guard (``cft-action guard -- ...``; :func:`cft_action.guard.is_active`
+    tells), the matched subscriptions less those whose rate window is closed or whose polls have
+    no message left: exact for this library's rate limits and polls. A subscription with a DDS-SQL
+    filter is counted (whether it takes a message depends on the message). Elsewhere the writer
+    cannot be asked, and this is the matched count (``publisher.get_subscription_count()``), an
+    upper bound. A count of 0 is exact in both: nothing would take the message, and the work of
+    making it can be skipped.
     """
-    return publisher.get_subscription_count()
+    matched = publisher.get_subscription_count()
+    if not guard.is_active():
+        return matched
+    closed = guard.closed_readers(_rcl.publisher_gid(publisher.handle.pointer))
+    return matched if closed is None else max(0, matched - closed)

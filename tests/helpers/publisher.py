@@ -11,6 +11,8 @@ Usage: ``python -m tests.helpers.publisher PREFIX [DEPTH]``: reliable, keep-last
   steady HZ S BASE
              publish ints BASE, BASE + 1, ... at HZ for S seconds, on an absolute schedule;
              replies SENT N
+  active T   replies ACTIVE A M: of the M matched subscriptions of topic T, A would take a
+             message published now (cft_action.active_subscription_count)
 """
 
 import sys
@@ -21,6 +23,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, Int32, String
 
+from cft_action import active_subscription_count
 from harness.polling import TIMEOUT, wait_until
 
 WORDS = ('hello', 'world', 'hello world')
@@ -70,6 +73,10 @@ def main() -> None:
                 if period:
                     time.sleep(float(period))
             print(f'SENT {count}', flush=True)
+        elif command == 'active':
+            publisher = publishers[argument][0]
+            print(f'ACTIVE {active_subscription_count(publisher)} '
+                  f'{publisher.get_subscription_count()}', flush=True)
         elif command == 'steady':
             hz, seconds, base = argument.split()
             publisher, make = publishers['ints']

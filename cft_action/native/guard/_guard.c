@@ -375,6 +375,16 @@ static void close_status_frame(struct cft_status_frame **frame) {
       (open) ? &status_frame_ : NULL;                                                            \
   if (status_frame_open_ != NULL) cft_status_frame_open(status_frame_open_)
 
+// The writer whose process_reader_filter_info runs on this thread, when the guard keeps the
+// writer's filters of the library's classes (Fast DDS 2.14): a filter created now is that
+// writer's (guard_created).
+static __thread const void *matching_writer;
+static void restore_matching_writer(const void **saved) { matching_writer = *saved; }
+#define MATCHING_WRITER_IN_SCOPE(writer)                                                         \
+  const void *saved_matching_ __attribute__((cleanup(restore_matching_writer))) =               \
+      matching_writer;                                                                          \
+  matching_writer = (writer)
+
 // Opens _guard_filter.c's claim on a reader of the library's classes for the enclosing block (the
 // real process_reader_filter_info), and closes it however the block is left.
 static void close_claim(bool *open) {
@@ -411,6 +421,7 @@ static void close_claim(bool *open) {
     if (f->state != CFT_GUARD_ACTIVE) { real(self, guid, info); return; }                       \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
     CLAIM_IN_SCOPE(FILTERS && scoped_lock_ != NULL, self, guid, info);                          \
+    MATCHING_WRITER_IN_SCOPE(FILTERS ? self : NULL);                                            \
     real(self, guid, info);                                                                     \
     if (FILTERS && scoped_lock_ != NULL) cft_filter_reader_changed(self, guid, info);           \
     else if (FILTERS) cft_filter_reader_dropped(self, guid);                                    \
@@ -471,11 +482,29 @@ bool cft_is_relevant2(const void *self, const void *change, const void *reader_g
   return real(self, change, reader_guid);
 }
 
+// DataWriterImpl::guid() of Fast DDS 2.x: a reference to the writer's GUID_t (16 bytes).
+#define WRITER_GUID2 "_ZNK8eprosima7fastdds3dds14DataWriterImpl4guidEv"
+typedef const uint8_t *(*writer_guid_fn)(const void *self);
+static void *real_writer_guid;
+
 // The guard's filters of the library's classes: every one may be created, and each is counted.
+// One created for a writer is listed under the writer's GUID (cft_guard_closed_readers).
 static bool guard_may_create(void) { return true; }
 static void guard_created(void *filter) {
-  (void)filter;
   __atomic_fetch_add(&filter_class_filters, 1, __ATOMIC_RELAXED);
+  if (matching_writer == NULL) return;
+  writer_guid_fn guid =
+      (writer_guid_fn)cft_guard_real(&real_writer_guid, families[0].known_soname, WRITER_GUID2);
+  if (guid != NULL) cft_filter_at_writer(filter, guid(matching_writer));
+}
+
+// How many of the readers matched by this process's writer whose GUID is `writer_guid` (16 bytes)
+// a sample written now would not reach because of a filter of the library's classes (a rate
+// window that is closed, a poll with no messages left); -1 where the guard does not keep the
+// writers' filters (not active on Fast DDS 2.14).
+CFT_EXPORT int cft_guard_closed_readers(const uint8_t *writer_guid) {
+  if (!cft_guard_knows_fastdds2()) return -1;
+  return cft_filter_class_closed(writer_guid);
 }
 static const struct cft_filter_class_owner guard_owner = {guard_may_create, guard_created};
 
