@@ -224,7 +224,7 @@ def writer_limits() -> dict[str, int]:
 
 
 #: The counters of cft_guard_heartbeat_count() in _guard_heartbeats.c, in its order.
-HEARTBEAT_COUNTERS = ('narrowed', 'widened', 'gaps_deferred', 'gaps_passed')
+HEARTBEAT_COUNTERS = ('narrowed', 'widened', 'gaps_deferred', 'gaps_passed', 'piggyback_spaced')
 
 
 def heartbeat_counts() -> dict[str, int]:
@@ -237,12 +237,15 @@ def heartbeat_counts() -> dict[str, int]:
     ``never``, the default, but for a status writer's every 10 ms; a number of ms lets it through
     to all readers at most that often per writer; ``off``: as Fast DDS), and leaves those GAPs
     to the reader's next sample, NACK or periodic heartbeat (``CFT_GUARD_DEFER_GAPS=0``: as Fast
-    DDS). Keys:
+    DDS). In a write that judged a reader the guard keeps (not a status writer's), the piggyback
+    HEARTBEAT goes at most every 10 ms per writer (``CFT_GUARD_PIGGYBACK_MS``; ``off``: every
+    write). Keys:
 
     - ``narrowed``: piggyback HEARTBEATs that went to the DATA's readers only;
     - ``widened``: those let through to all readers;
     - ``gaps_deferred``: per-write GAPs left for later (0 on 2.14.5, which sends none);
-    - ``gaps_passed``: GAPs of the other kinds, sent as Fast DDS sends them.
+    - ``gaps_passed``: GAPs of the other kinds, sent as Fast DDS sends them;
+    - ``piggyback_spaced``: piggyback HEARTBEATs left out, within 10 ms of the writer's last.
 
     An empty dict when the guard is not preloaded.
     """

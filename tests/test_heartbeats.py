@@ -4,7 +4,9 @@ sample that is not theirs (cft_action/native/guard/_guard_heartbeats.c).
 A keep-last-10 writer's history is nearly always full, and Fast DDS 2.14 then heartbeats every
 reader at each write: a filtered reader, which gets none of the DATA, receives a HEARTBEAT of its
 own per write. The guard keeps that HEARTBEAT with the DATA, to the DATA's readers
-(``CFT_GUARD_HEARTBEAT_ALL_MS``, default ``never``; a status writer's every 10 ms).
+(``CFT_GUARD_HEARTBEAT_ALL_MS``, default ``never``; a status writer's every 10 ms), and in a
+write that judged a kept reader sends that HEARTBEAT at most every 10 ms
+(``CFT_GUARD_PIGGYBACK_MS``).
 On the wire (UDP only, captured on loopback as in tests/test_signatures.py): each filtered reader
 gets no more lone HEARTBEATs than the guard let through, and exactly its own feedback; the plain
 reader beside them gets every sample.
@@ -35,6 +37,7 @@ def test_a_full_history_sends_filtered_readers_no_heartbeat_per_foreign_write() 
     before, after = run.stats_at_go['guard_heartbeats'], run.stats_after['guard_heartbeats']
     counts = {k: after[k] - before[k] for k in after}
     assert counts['narrowed'] > 0, counts  # the history was full, and the guard narrowed it
+    assert counts['piggyback_spaced'] > 0, counts  # writes within 10 ms of a HEARTBEAT sent none
     # The port of each client's participant: the plain one got DATA for every write.
     captured = run.captured
     writes = GOALS * ORDER * len(clients)

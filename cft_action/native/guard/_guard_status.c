@@ -305,12 +305,19 @@ void cft_status_frame_open(struct cft_status_frame *f) {
   f->count = 0;
   f->overflow = false;
   f->judged = false;
+  f->kept = false;
   frame = f;
 }
 
 void cft_status_frame_close(struct cft_status_frame *f) { frame = f->outer; }
 
 bool cft_status_write_now(void) { return frame != NULL && frame->judged; }
+
+void cft_write_kept_judged(void) {
+  if (frame != NULL) frame->kept = true;
+}
+
+bool cft_write_kept_now(void) { return frame != NULL && frame->kept; }
 
 static bool owed(void) {
   if (frame == NULL || asking == NULL) return false;

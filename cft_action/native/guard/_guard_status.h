@@ -37,6 +37,7 @@ struct cft_status_frame {
   int count;
   bool overflow;                   // more than CFT_STATUS_FRAME_READERS: every reader is owed
   bool judged;                     // a kept status reader's verdict ran in this write
+  bool kept;                       // a kept reader's verdict (any class) ran in this write
   const void *readers[CFT_STATUS_FRAME_READERS];  // ReaderProxy objects, compared, never read
 };
 void cft_status_frame_open(struct cft_status_frame *frame);
@@ -46,5 +47,10 @@ void cft_status_frame_close(struct cft_status_frame *frame);
 // on (a status writer's): _guard_heartbeats.c heartbeats all its readers, as their
 // acknowledgements end the owed chains.
 bool cft_status_write_now(void);
+
+// A kept reader's verdict ran in the write on this thread (_guard_filter.c says so), and whether
+// one did: _guard_heartbeats.c spaces out that write's piggyback HEARTBEATs.
+void cft_write_kept_judged(void);
+bool cft_write_kept_now(void);
 
 #endif  // CFT_ACTION_GUARD_STATUS_H_
