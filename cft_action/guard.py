@@ -237,9 +237,9 @@ def heartbeat_counts() -> dict[str, int]:
     ``never``, the default, but for a status writer's every 10 ms; a number of ms lets it through
     to all readers at most that often per writer; ``off``: as Fast DDS), and leaves those GAPs
     to the reader's next sample, NACK or periodic heartbeat (``CFT_GUARD_DEFER_GAPS=0``: as Fast
-    DDS). In a write that judged a reader the guard keeps (not a status writer's), the piggyback
-    HEARTBEAT goes at most every 10 ms per writer (``CFT_GUARD_PIGGYBACK_MS``; ``off``: every
-    write). Keys:
+    DDS). In a write that judged a reader the guard keeps and a plain one (not a status
+    writer's), the piggyback HEARTBEAT goes at most every 10 ms per writer
+    (``CFT_GUARD_PIGGYBACK_MS``; ``off``: every write). Keys:
 
     - ``narrowed``: piggyback HEARTBEATs that went to the DATA's readers only;
     - ``widened``: those let through to all readers;

@@ -5,7 +5,7 @@ A keep-last-10 writer's history is nearly always full, and Fast DDS 2.14 then he
 reader at each write: a filtered reader, which gets none of the DATA, receives a HEARTBEAT of its
 own per write. The guard keeps that HEARTBEAT with the DATA, to the DATA's readers
 (``CFT_GUARD_HEARTBEAT_ALL_MS``, default ``never``; a status writer's every 10 ms), and in a
-write that judged a kept reader sends that HEARTBEAT at most every 10 ms
+write that judged a kept reader and a plain one sends that HEARTBEAT at most every 10 ms
 (``CFT_GUARD_PIGGYBACK_MS``).
 On the wire (UDP only, captured on loopback as in tests/test_signatures.py): each filtered reader
 gets no more lone HEARTBEATs than the guard let through, and exactly its own feedback; the plain

@@ -469,6 +469,7 @@ bool cft_is_relevant2(const void *self, const void *change, const void *reader_g
   struct family *f = ready(0);
   if (f->state == CFT_GUARD_ACTIVE) {
     int verdict = cft_filter_relevance(self, change, reader_guid);
+    cft_write_judged(verdict >= 0 ? CFT_KEPT_READER : CFT_OTHER_READER);
     if (verdict >= 0) return verdict == 1;
     if (cft_replies_relevance(change, reader_guid) == 0) return false;
   }

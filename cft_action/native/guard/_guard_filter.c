@@ -628,10 +628,7 @@ int cft_filter_relevance(const void *writer, const void *change, const void *rea
   else if (e != NULL && e->kept != NULL)
     verdict = cft_filter_grammar_matches(e->kept, e->program, c + CC_PAYLOAD);
   pthread_mutex_unlock(&table_lock);
-  if (verdict >= 0) {
-    count(C_RELEVANCE);
-    cft_write_kept_judged();
-  }
+  if (verdict >= 0) count(C_RELEVANCE);
   return verdict;
 #else
   (void)writer, (void)change;

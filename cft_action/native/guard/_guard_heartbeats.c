@@ -30,18 +30,21 @@
 //    before it), with a NACK response, or with the periodic heartbeat, which then goes to each
 //    reader separately, the GAP first; as 2.14.5 sends it (CFT_GUARD_DEFER_GAPS=0 turns it off).
 //
-// And one thing that plain readers do see: the piggyback HEARTBEAT rides in the DATA's datagram
-// at every write while the history is full, and filtered readers keep a keep-last-10 history full
-// (a volatile writer drops a change once every reader acknowledged it; a filtered reader
-// acknowledges others' changes only when a GAP or HEARTBEAT reaches it), where plain readers'
-// acknowledgements empty it about every other write: beside 32 filtered clients a plain one
-// received 16-17 B more per 36 B sample. 3. In a write in which a kept reader was judged
-// (_guard_filter.c), the definition of send_heartbeat_nts_ below lets the piggyback's HEARTBEAT go
-// at most once per CFT_GUARD_PIGGYBACK_MS (10 by default; `off`: every write) per writer; a
-// widened one always goes, and a status writer's too (the acknowledgements it asks for end the
-// owed chains of _guard_status.c: spaced out, N = 16 clients x 4 goals got 166 status samples per
-// client in one run). Readers learn the range at most that much later; HEARTBEATs of other callers
-// (the personal one before a filtered reader's DATA, the periodic one) go through.
+// 3. What plain readers see: the piggyback HEARTBEAT rides in the DATA's datagram at every write
+//    while the history is full, and filtered readers keep a keep-last-10 history full (a volatile
+//    writer drops a change once every reader acknowledged it; a filtered reader acknowledges
+//    others' changes only when a GAP or HEARTBEAT reaches it), where plain readers'
+//    acknowledgements empty it about every other write: beside 32 filtered clients a plain one
+//    received 16-17 B more per 36 B sample. In a write that judged both a reader the guard keeps
+//    (_guard_filter.c) and another (a plain one), the definition of send_heartbeat_nts_ below lets
+//    the piggyback's HEARTBEAT go at most once per CFT_GUARD_PIGGYBACK_MS (10 by default; `off`:
+//    every write) per writer; a widened one always goes, and a status writer's too (the
+//    acknowledgements it asks for end the owed chains of _guard_status.c: spaced out, N = 16
+//    clients x 4 goals got 166 status samples per client in one run). With filtered readers only,
+//    every HEARTBEAT goes, as in Fast DDS (spaced, their bytes were the same: N = 16 x 4 goals,
+//    deep history, 11.8 B per own payload byte besides status either way). Readers learn the
+//    range at most that much later; HEARTBEATs of other callers (the personal one before a
+//    filtered reader's DATA, the periodic one) go through.
 //
 // These members are exported and called through the PLT; the callers are told by the return
 // address, whose symbol dladdr names once per call site. They act only where the guard locks the
@@ -292,8 +295,9 @@ void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final
   long interval = piggyback_ns();
   bool widened = widened_now;
   widened_now = false;
-  if (interval > 0 && !widened && in_piggyback && cft_write_kept_now() &&
-      !cft_status_write_now() && !due(piggyback_slots, (uintptr_t)self, interval)) {
+  if (interval > 0 && !widened && in_piggyback &&
+      cft_write_judged_now() == (CFT_KEPT_READER | CFT_OTHER_READER) && !cft_status_write_now() &&
+      !due(piggyback_slots, (uintptr_t)self, interval)) {
     count(PIGGYBACK_SPACED);
     return;
   }

@@ -305,7 +305,7 @@ void cft_status_frame_open(struct cft_status_frame *f) {
   f->count = 0;
   f->overflow = false;
   f->judged = false;
-  f->kept = false;
+  f->asked = 0;
   frame = f;
 }
 
@@ -313,11 +313,11 @@ void cft_status_frame_close(struct cft_status_frame *f) { frame = f->outer; }
 
 bool cft_status_write_now(void) { return frame != NULL && frame->judged; }
 
-void cft_write_kept_judged(void) {
-  if (frame != NULL) frame->kept = true;
+void cft_write_judged(int reader) {
+  if (frame != NULL) frame->asked |= reader;
 }
 
-bool cft_write_kept_now(void) { return frame != NULL && frame->kept; }
+int cft_write_judged_now(void) { return frame != NULL ? frame->asked : 0; }
 
 static bool owed(void) {
   if (frame == NULL || asking == NULL) return false;

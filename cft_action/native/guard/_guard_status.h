@@ -37,7 +37,7 @@ struct cft_status_frame {
   int count;
   bool overflow;                   // more than CFT_STATUS_FRAME_READERS: every reader is owed
   bool judged;                     // a kept status reader's verdict ran in this write
-  bool kept;                       // a kept reader's verdict (any class) ran in this write
+  int asked;                       // CFT_KEPT_READER | CFT_OTHER_READER: whose relevance it asked
   const void *readers[CFT_STATUS_FRAME_READERS];  // ReaderProxy objects, compared, never read
 };
 void cft_status_frame_open(struct cft_status_frame *frame);
@@ -48,9 +48,12 @@ void cft_status_frame_close(struct cft_status_frame *frame);
 // acknowledgements end the owed chains.
 bool cft_status_write_now(void);
 
-// A kept reader's verdict ran in the write on this thread (_guard_filter.c says so), and whether
-// one did: _guard_heartbeats.c spaces out that write's piggyback HEARTBEATs.
-void cft_write_kept_judged(void);
-bool cft_write_kept_now(void);
+// Whose relevance was asked in the write on this thread: a reader that _guard_filter.c keeps, or
+// another (_guard.c's is_relevant says so), and both: _guard_heartbeats.c spaces out the piggyback
+// HEARTBEATs of a write that had both.
+#define CFT_KEPT_READER 1
+#define CFT_OTHER_READER 2
+void cft_write_judged(int reader);
+int cft_write_judged_now(void);
 
 #endif  // CFT_ACTION_GUARD_STATUS_H_
