@@ -68,8 +68,18 @@ def library_path() -> str:
         'reinstall cft-action with a C compiler available (pip install .)')
 
 
+_process: Optional[ctypes.CDLL] = None  # _preloaded's handle, once found
+
+
 def _preloaded() -> Optional[ctypes.CDLL]:
-    """Return a handle to this process's global scope if the guard's C API is visible in it."""
+    """Return a handle to this process's global scope if the guard's C API is visible in it.
+
+    Found once: a library in the global scope stays there (a preload, or a later RTLD_GLOBAL
+    load, which is why an absent guard is looked for again at each call).
+    """
+    global _process
+    if _process is not None:
+        return _process
     try:
         process = ctypes.CDLL(None)
         process.cft_guard_state  # noqa: B018  (lookup only)
@@ -81,6 +91,7 @@ def _preloaded() -> Optional[ctypes.CDLL]:
     process.cft_guard_reason.restype = ctypes.c_char_p
     process.cft_guard_filter_layout_report.argtypes = []
     process.cft_guard_filter_layout_report.restype = ctypes.c_char_p
+    _process = process
     return process
 
 

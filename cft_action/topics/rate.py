@@ -268,7 +268,5 @@ def active_subscription_count(publisher: Publisher) -> int:
     making it can be skipped.
     """
     matched = publisher.get_subscription_count()
-    if not guard.is_active():
-        return matched
     closed = guard.closed_readers(_rcl.publisher_gid(publisher.handle.pointer))
     return matched if closed is None else max(0, matched - closed)
