@@ -46,8 +46,10 @@
 //    range at most that much later; HEARTBEATs of other callers (the personal one before a
 //    filtered reader's DATA, the periodic one) go through.
 //
-// These members are exported and called through the PLT; the callers are told by the return
-// address, whose symbol dladdr names once per call site. They act only where the guard locks the
+// These members are exported and called through the PLT. A call from deliver_sample_to_network is
+// told by the return address, whose symbol dladdr names once per call site; one from the
+// piggyback by send_heartbeat_piggyback_nts_, defined here too (it reaches send_heartbeat_nts_ by a
+// tail call, whose return address is its own caller's). They act only where the guard locks the
 // Fast DDS 2.14 it knows (cft_guard_knows_fastdds2); elsewhere every call goes through.
 
 #define _GNU_SOURCE
@@ -73,8 +75,7 @@
   SW_PREFIX "29send_heartbeat_piggyback_nts_ERNS1_16RTPSMessageGroupERNS1_21LocatorSelectorSenderERj"
 #define ADD_GAPS \
   SW_PREFIX "32add_gaps_for_removed_irrelevantsERNS1_11ReaderProxyERNS1_16RTPSMessageGroupE"
-// The callers, by the prefix of their mangled names (their parameters follow).
-#define PIGGYBACK_CALLER SW_PREFIX "29send_heartbeat_piggyback_nts_"
+// The caller told by the return address, by the prefix of its mangled name (its parameters follow).
 #define DELIVER_CALLER SW_PREFIX "25deliver_sample_to_network"
 
 enum { NARROWED = 0, WIDENED = 1, GAPS_DEFERRED = 2, GAPS_PASSED = 3, PIGGYBACK_SPACED = 4,
@@ -86,7 +87,7 @@ static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_
 // ---- the callers -----------------------------------------------------------------------------
 // The call sites seen so far, and which caller each is in: a handful at most. A slot's `caller` is
 // written before its address is published (release), under sites_lock.
-enum { OTHER = 0, PIGGYBACK = 1, DELIVER = 2 };
+enum { OTHER = 0, DELIVER = 1 };
 #define SITES 16
 static struct site {
   uintptr_t address;  // 0: free
@@ -97,7 +98,6 @@ static pthread_mutex_t sites_lock = PTHREAD_MUTEX_INITIALIZER;
 static int name_caller(uintptr_t address) {
   Dl_info info;
   if (!dladdr((void *)address, &info) || info.dli_sname == NULL) return OTHER;
-  if (strncmp(info.dli_sname, PIGGYBACK_CALLER, strlen(PIGGYBACK_CALLER)) == 0) return PIGGYBACK;
   if (strncmp(info.dli_sname, DELIVER_CALLER, strlen(DELIVER_CALLER)) == 0) return DELIVER;
   return OTHER;
 }
@@ -124,6 +124,25 @@ static int caller_of(uintptr_t address) {
   }
   pthread_mutex_unlock(&sites_lock);
   return caller;
+}
+
+// The piggyback runs on this thread: select_all_readers_nts and send_heartbeat_nts_ called now are
+// its own (the latter by a tail call, whose return address would name the piggyback's caller).
+static __thread bool in_piggyback;
+typedef void (*piggyback_fn)(void *self, void *group, void *locator_selector, uint32_t *bytes);
+static void *real_piggyback;
+
+CFT_EXPORT void cft_send_heartbeat_piggyback_nts2(void *self, void *group, void *locator_selector,
+                                                  uint32_t *bytes) __asm__(PIGGYBACK_MEMBER);
+void cft_send_heartbeat_piggyback_nts2(void *self, void *group, void *locator_selector,
+                                       uint32_t *bytes) {
+  piggyback_fn real =
+      (piggyback_fn)cft_guard_real(&real_piggyback, FASTDDS2_SONAME, PIGGYBACK_MEMBER);
+  if (real == NULL) return;  // unreachable: only that Fast DDS calls this member
+  bool outer = in_piggyback;
+  in_piggyback = true;
+  real(self, group, locator_selector, bytes);
+  in_piggyback = outer;
 }
 
 // ---- the switches --------------------------------------------------------------------------
@@ -232,7 +251,7 @@ CFT_EXPORT void cft_select_all_readers_nts2(void *self, void *group, void *locat
 void cft_select_all_readers_nts2(void *self, void *group, void *locator_selector) {
   long interval = heartbeat_all_ns();
   if (interval == NEVER && cft_status_write_now()) interval = STATUS_HEARTBEAT_ALL_MS * 1000000L;
-  if (interval >= 0 && caller_of((uintptr_t)__builtin_return_address(0)) == PIGGYBACK) {
+  if (interval >= 0 && in_piggyback) {
     if (interval == NEVER || !due(widened_slots, (uintptr_t)self, interval)) {
       count(NARROWED);
       return;
@@ -264,25 +283,6 @@ void cft_add_gaps_for_removed_irrelevants2(void *self, void *reader_proxy, void 
 
 // ---- 3. the piggyback HEARTBEAT itself, spaced out (CFT_GUARD_PIGGYBACK_MS) --------------------
 static struct writer_slot piggyback_slots[WRITER_SLOTS];
-
-// The piggyback ends in a tail call of send_heartbeat_nts_, whose return address is then its
-// caller's: so the piggyback itself is defined here, and says on this thread that it runs.
-static __thread bool in_piggyback;
-typedef void (*piggyback_fn)(void *self, void *group, void *locator_selector, uint32_t *bytes);
-static void *real_piggyback;
-
-CFT_EXPORT void cft_send_heartbeat_piggyback_nts2(void *self, void *group, void *locator_selector,
-                                                  uint32_t *bytes) __asm__(PIGGYBACK_MEMBER);
-void cft_send_heartbeat_piggyback_nts2(void *self, void *group, void *locator_selector,
-                                       uint32_t *bytes) {
-  piggyback_fn real =
-      (piggyback_fn)cft_guard_real(&real_piggyback, FASTDDS2_SONAME, PIGGYBACK_MEMBER);
-  if (real == NULL) return;  // unreachable: only that Fast DDS calls this member
-  bool outer = in_piggyback;
-  in_piggyback = true;
-  real(self, group, locator_selector, bytes);
-  in_piggyback = outer;
-}
 
 typedef void (*send_heartbeat_fn)(void *self, size_t readers, void *group, bool final,
                                   bool liveliness);
