@@ -242,6 +242,10 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'cft_response_filter_refused': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_response_filter_counts':
         (_reader_lock, None, [_void_p, ctypes.POINTER(ctypes.c_ulong)], None),
+    'cft_status_acks_install': (_reader_lock, ctypes.c_int, [], None),
+    'cft_status_acks_error': (_reader_lock, ctypes.c_char_p, [], None),
+    'cft_status_acks_taken': (_reader_lock, ctypes.c_int, [], None),
+    'cft_status_acks_refused': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_writer_marks_install': (_reader_lock, ctypes.c_int, [], None),
     'cft_writer_marks_error': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_writer_is_marked': (_reader_lock, ctypes.c_int, [ctypes.c_char_p], None),
@@ -403,6 +407,25 @@ def response_filter_end() -> tuple[Optional[int], int, str]:
     created = _lib.cft_response_filter_end(ctypes.byref(readers))
     return created, readers.value, (_lib.cft_response_filter_refused() or b'').decode(
         'utf-8', 'replace')
+
+
+def status_acks_begin() -> str:
+    """Make the status readers that this thread registers with the library's status filter class
+    until :func:`status_acks_end` acknowledge a HEARTBEAT at once, not 5 ms later
+    (cft_action/native/reader/_status_acks.c); return why they cannot, or ``''``."""
+    reason = _install_part(_lib.cft_status_acks_install, _lib.cft_status_acks_error)
+    if not reason:
+        _lib.cft_status_acks_taken()
+    return reason
+
+
+def status_acks_end() -> str:
+    """``''`` if a status reader registered on this thread since :func:`status_acks_begin`
+    acknowledges at once; else why not."""
+    if _lib.cft_status_acks_taken() > 0:
+        return ''
+    return ((_lib.cft_status_acks_refused() or b'').decode('utf-8', 'replace')
+            or 'no status reader was registered with the status filter')
 
 
 def response_filter_counts(created_filter: int) -> tuple[int, int]:

@@ -418,7 +418,7 @@ def test_an_observer_without_live_goals_is_not_woken_by_others_status(ros, guard
     others = None
     try:
         client = ActionClient(ros.node, Fibonacci, action)
-        assert client.goal_status_state.filtered
+        assert client.goal_status_state.filtered and client.goal_status_state.prompt_acks
         assert client.wait_for_server(timeout_sec=20)
         assert round_trip(ros, client), 'the server never answered a goal'
         table = client._status._table

@@ -18,6 +18,7 @@
 #include <fastdds/rtps/common/WriteParams.h>
 #include <fastdds/rtps/history/ReaderHistory.h>
 #include <fastdds/rtps/reader/RTPSReader.h>
+#include <fastdds/rtps/reader/StatefulReader.h>
 #include <fastrtps/attributes/TopicAttributes.h>
 #include <cstddef>
 // rmw's service structures, for the guard's record of who requested each goal (_guard_status.c):
@@ -37,9 +38,11 @@ using eprosima::fastrtps::TopicAttributes;
 using eprosima::fastrtps::rtps::CacheChange_t;
 using eprosima::fastrtps::rtps::ReaderHistory;
 using eprosima::fastrtps::rtps::ReaderProxyData;
+using eprosima::fastrtps::rtps::ReaderTimes;
 using eprosima::fastrtps::rtps::RTPSReader;
 using eprosima::fastrtps::rtps::SampleIdentity;
 using eprosima::fastrtps::rtps::SerializedPayload_t;
+using eprosima::fastrtps::rtps::StatefulReader;
 using eprosima::fastrtps::rtps::WriteParams;
 
 #define LAYOUT(name, value, what) asm volatile("\n->" #name " %c0 " what : : "i"((long)(value)))
@@ -95,6 +98,11 @@ void cft_fastdds_layout() {
   LAYOUT(RR_HISTORY, offsetof(RTPSReader, mp_history), "RTPSReader::mp_history");
   LAYOUT(RR_DATA_FILTER, offsetof(RTPSReader, data_filter_), "RTPSReader::data_filter_");
   LAYOUT(RH_READER, offsetof(ReaderHistory, mp_reader), "ReaderHistory::mp_reader");
+  LAYOUT(SR_SIZE, sizeof(StatefulReader), "sizeof(StatefulReader)");
+  LAYOUT(SR_TIMES, offsetof(StatefulReader, times_), "StatefulReader::times_ (ReaderTimes)");
+  LAYOUT(RT_SIZE, sizeof(ReaderTimes), "sizeof(ReaderTimes)");
+  LAYOUT(RT_RESPONSE_DELAY, offsetof(ReaderTimes, heartbeatResponseDelay),
+         "ReaderTimes::heartbeatResponseDelay (Duration_t)");
   LAYOUT(TOPIC_NAME, offsetof(TopicAttributes, topicName), "TopicAttributes::topicName");
   LAYOUT(DWQ_READER_FILTERS,
          offsetof(DataWriterQos, writer_resource_limits_) +

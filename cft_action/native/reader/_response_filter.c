@@ -11,8 +11,7 @@
 // discards, so the client sees exactly the responses it saw before, with fewer wakes; Fast DDS
 // marks a dropped sample irrelevant, so the reader acknowledges it as if it had been taken.
 //
-// The readers are found as they are created: RTPSParticipant::registerReader, which
-// DataReaderImpl::enable calls through libfastrtps's PLT, is redirected; on a thread inside
+// The readers are found as they are registered (_registration.c): on a thread inside
 // cft_response_filter_begin/end, a reader of a topic "rr/...Reply" (rmw_fastrtps's response
 // topics) without a content filter gets the filter before the real registration, so before any
 // writer is matched and any receive thread reads the member.
@@ -33,22 +32,14 @@
 #include <unistd.h>
 
 #include "_fastdds_layout.h"
-#include "_patch.h"
+#include "_registration.h"
 
 #define EXPORT __attribute__((visibility("default")))
-
-#define FASTRTPS_SONAME "libfastrtps.so.2.14"
-#define REGISTER_READER                                                                      \
-  "_ZN8eprosima8fastrtps4rtps15RTPSParticipant14registerReaderEPNS1_10RTPSReaderERKNS0_15" \
-  "TopicAttributesERKNS_7fastdds3dds9ReaderQosEPKNS8_4rtps21ContentFilterPropertyE"
 
 // rmw_fastrtps names a service's response topic "rr/<service>Reply".
 #define RESPONSE_PREFIX "rr/"
 #define RESPONSE_SUFFIX "Reply"
 #define MAX_MOVE 64
-
-typedef bool (*register_reader_fn)(void *self, void *reader, const void *topic, const void *qos,
-                                   const void *content_filter);
 
 // One per action client, shared by its response readers. Never freed: rclpy destroys the rcl
 // client once no executor uses it, which may be after the client's destroy() returns.
@@ -64,8 +55,6 @@ static __thread int filtered_here;                // readers given the filter in
 static __thread char refused[160];  // why a response reader of this request did not get it
 
 #if CFT_LAYOUT_KNOWN
-static register_reader_fn real_register_reader;
-
 // IReaderDataFilter declares one pure virtual member and no destructor: its Itanium vtable is
 // { is_relevant }. A received change holds the related sample identity of its inline QoS in
 // write_params.sample_identity (ParameterList::updateCacheChangeFromInlineQos; the intraprocess
@@ -144,10 +133,9 @@ static struct response_filter *request_filter(void) {
   return current;
 }
 
-static bool register_reader(void *self, void *reader, const void *topic, const void *qos,
-                            const void *content_filter) {
-  if (requested && content_filter == NULL && reader != NULL &&
-      is_response_topic((const char *)topic + TOPIC_NAME)) {
+void cft_response_filter_registering(void *reader, const char *topic_name,
+                                     const void *content_filter) {
+  if (requested && content_filter == NULL && is_response_topic(topic_name)) {
     uintptr_t member = data_filter_member((uintptr_t)reader);
     struct response_filter *filter = member != 0 ? request_filter() : NULL;
     if (filter != NULL) {
@@ -156,25 +144,10 @@ static bool register_reader(void *self, void *reader, const void *topic, const v
       filtered_here++;
     }
   }
-  return real_register_reader(self, reader, topic, qos, content_filter);
 }
 #endif
 
-static int install(struct cft_install *once) {
-#if !CFT_LAYOUT_KNOWN
-  return cft_install_fail(once, -5, "no Fast DDS layout at build time", CFT_LAYOUT_SOURCE);
-#else
-  static const char *const names[] = {REGISTER_READER};
-  void *resolved[1];
-  int status;
-  if (cft_resolve(once, FASTRTPS_SONAME, names, 1, resolved, &status) == NULL) return status;
-  real_register_reader = (register_reader_fn)resolved[0];
-  if (cft_patch_got(FASTRTPS_SONAME, REGISTER_READER, resolved[0], (void *)register_reader) != 1)
-    return cft_install_fail(once, -3, "no free PLT slot in " FASTRTPS_SONAME " for",
-                            REGISTER_READER);
-  return 0;
-#endif
-}
+static int install(struct cft_install *once) { return cft_registration_install(once); }
 
 // 0 once response readers created inside cft_response_filter_begin/end get the filter; < 0 if
 // that cannot be arranged (cft_response_filter_error says why). Later calls return the first
