@@ -63,9 +63,7 @@
 //    follows (an exception; not seen) is dropped and counted: the reader learns of the run from the
 //    next HEARTBEAT and NACKs it, and the writer answers with a GAP. With separate sending (a
 //    datagram per reader for the DATA: Fast DDS's builtin discovery-server and security writers,
-//    never one with kept readers) the GAP goes at its HEARTBEAT, as in Fast DDS;
-//    m_separateSendingEnabled is read at the headers' offset, so the merge is on only where the
-//    loaded library's HAVE_SECURITY, which moves it, is theirs.
+//    never one with kept readers) the GAP goes at its HEARTBEAT, as in Fast DDS.
 //
 // These members are exported and called through the PLT. A call from deliver_sample_to_network is
 // told by the return address, whose symbol dladdr names once per call site; one from the
@@ -353,16 +351,30 @@ void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final
 #define SEQUENCE_SIZE 8  // SequenceNumber_t and GUID_t: as on the wire
 #define GUID_SIZE 16
 
-// CFT_GUARD_MERGE_GAPS: on unless "off" or "0", where the guard knows the Fast DDS and the loaded
-// library's HAVE_SECURITY is the headers' (it moves m_separateSendingEnabled).
+// CFT_GUARD_MERGE_GAPS: on unless "off" or "0", and only where the guard knows the Fast DDS.
 static bool merge_on(void) {
-  static int on = -1;  // -1: not decided yet
+  static int on = -1;  // -1: not read yet
+  return cft_guard_part_on(&on, "CFT_GUARD_MERGE_GAPS", true);
+}
+
+// Whether `writer` sends each reader's DATA in a datagram of its own (m_separateSendingEnabled).
+// In Fast DDS 2.14 only builtin writers do (the discovery server's, security's), which write in no
+// frame that judged kept readers. The flag is read where its offset is known: the headers', when
+// the loaded library's HAVE_SECURITY, which moves it, is theirs (apt's 2.14.6 beside the wheels'
+// headers is not).
+static bool separate_sending(const void *writer) {
+  static int offset_known = -1;  // -1: not decided yet
   static void *security_symbol;
-  if (__atomic_load_n(&on, __ATOMIC_RELAXED) >= 0) return on;
-  bool loaded_security =
-      cft_guard_real(&security_symbol, FASTDDS2_SONAME, SECURITY_ONLY_SYMBOL) != NULL;
-  return cft_guard_part_on(&on, "CFT_GUARD_MERGE_GAPS",
-                           loaded_security == CFT_LAYOUT_HAVE_SECURITY);
+  int known = __atomic_load_n(&offset_known, __ATOMIC_RELAXED);
+  if (known < 0) {
+    bool loaded_security =
+        cft_guard_real(&security_symbol, FASTDDS2_SONAME, SECURITY_ONLY_SYMBOL) != NULL;
+    known = loaded_security == CFT_LAYOUT_HAVE_SECURITY;
+    __atomic_store_n(&offset_known, known, __ATOMIC_RELAXED);
+  }
+  bool separate = false;
+  if (known) memcpy(&separate, (const uint8_t *)writer + SW_SEPARATE_SENDING, sizeof separate);
+  return separate;
 }
 
 // A personal GAP held back on this thread, with the HEARTBEAT that followed it. Those held share
@@ -433,9 +445,7 @@ static bool heartbeat_merged(void *self, void *group, bool final, bool livelines
   awaiting_heartbeat = NULL;
   if (h == NULL || h->group != group || in_piggyback || caller_of(return_address) != DELIVER)
     return false;
-  bool separate;
-  memcpy(&separate, (const uint8_t *)self + SW_SEPARATE_SENDING, sizeof separate);
-  if (separate) {
+  if (separate_sending(self)) {
     // Each reader's DATA goes in a datagram of its own, maybe not this reader's: the GAP goes
     // now, in this reader's, and the HEARTBEAT after it, as Fast DDS sends them.
     held_count--;
