@@ -6,7 +6,9 @@ reader at each write: a filtered reader, which gets none of the DATA, receives a
 own per write. The guard keeps that HEARTBEAT with the DATA, to the DATA's readers
 (``CFT_GUARD_HEARTBEAT_ALL_MS``, default ``never``; a status writer's every 10 ms), and in a
 write that judged a kept reader and a plain one sends that HEARTBEAT at most every 10 ms
-(``CFT_GUARD_PIGGYBACK_MS``).
+(``CFT_GUARD_PIGGYBACK_MS``). With filtered readers only, the personal GAP and HEARTBEAT that
+Fast DDS sends a reader in a datagram of their own before its DATA, after others' samples, go in
+the DATA's datagram (``CFT_GUARD_MERGE_GAPS``).
 On the wire (UDP only, captured on loopback as in tests/test_signatures.py): each filtered reader
 gets no more lone HEARTBEATs than the guard let through, and exactly its own feedback; the plain
 reader beside them gets every sample.
@@ -38,6 +40,7 @@ def test_a_full_history_sends_filtered_readers_no_heartbeat_per_foreign_write() 
     counts = {k: after[k] - before[k] for k in after}
     assert counts['narrowed'] > 0, counts  # the history was full, and the guard narrowed it
     assert counts['piggyback_spaced'] > 0, counts  # writes within 10 ms of a HEARTBEAT sent none
+    assert counts['gaps_merged'] == 0, counts  # every write judged the plain reader too
     # The port of each client's participant: the plain one got DATA for every write.
     captured = run.captured
     writes = GOALS * ORDER * len(clients)
@@ -49,3 +52,26 @@ def test_a_full_history_sends_filtered_readers_no_heartbeat_per_foreign_write() 
         assert datagrams['data'] <= GOALS * ORDER + SLACK, captured  # own samples, and repairs
         # never widened for the feedback writer (the status writer's widenings are in the counts)
         assert datagrams['heartbeat'] <= SLACK, (captured, counts)
+
+
+@pytest.mark.parametrize('merged', [True, False], ids=['merged', 'CFT_GUARD_MERGE_GAPS=0'])
+def test_filtered_readers_get_their_personal_gap_in_their_data(merged: bool) -> None:
+    """Two filtered clients alone on the writer: each one's sample after the other's follows a run
+    of changes filtered out for it, which Fast DDS closes with a personal GAP and HEARTBEAT in a
+    datagram of their own before the DATA. The guard puts them in the DATA's datagram; with
+    ``CFT_GUARD_MERGE_GAPS=0`` they come alone, as the capture sees."""
+    clients = [('client', 'guarded'), ('client', 'guarded')]
+    run = feedback_on_the_wire(clients, writer_datagrams_by_port, GOALS, ORDER, feedback_depth=10,
+                               server_env={} if merged else {'CFT_GUARD_MERGE_GAPS': '0'})
+    for report in run.reports:
+        assert report['complete_goals'] == GOALS and report['misrouted'] == 0, report
+    before, after = run.stats_at_go['guard_heartbeats'], run.stats_after['guard_heartbeats']
+    counts = {k: after[k] - before[k] for k in after}
+    assert counts['merges_dropped'] == 0, counts
+    assert (counts['gaps_merged'] > 0) is merged, counts
+    assert len(run.captured) == 2, run.captured
+    for datagrams in run.captured.values():
+        assert datagrams['data'] <= GOALS * ORDER + SLACK, run.captured
+        alone = datagrams['gap'] + datagrams['gap+heartbeat']
+        # Merged: only the periodic heartbeat's (2.14.6 sends a reader's GAP with it).
+        assert (alone <= SLACK) is merged, (run.captured, counts)

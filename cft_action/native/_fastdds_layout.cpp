@@ -19,6 +19,7 @@
 #include <fastdds/rtps/history/ReaderHistory.h>
 #include <fastdds/rtps/reader/RTPSReader.h>
 #include <fastdds/rtps/reader/StatefulReader.h>
+#include <fastdds/rtps/writer/StatefulWriter.h>
 #include <fastrtps/attributes/TopicAttributes.h>
 #include <cstddef>
 // rmw's service structures, for the guard's record of who requested each goal (_guard_status.c):
@@ -41,8 +42,10 @@ using eprosima::fastrtps::rtps::ReaderProxyData;
 using eprosima::fastrtps::rtps::ReaderTimes;
 using eprosima::fastrtps::rtps::RTPSReader;
 using eprosima::fastrtps::rtps::SampleIdentity;
+using eprosima::fastrtps::rtps::SequenceNumberSet_t;
 using eprosima::fastrtps::rtps::SerializedPayload_t;
 using eprosima::fastrtps::rtps::StatefulReader;
+using eprosima::fastrtps::rtps::StatefulWriter;
 using eprosima::fastrtps::rtps::WriteParams;
 
 #define LAYOUT(name, value, what) asm volatile("\n->" #name " %c0 " what : : "i"((long)(value)))
@@ -83,6 +86,13 @@ void cft_fastdds_layout() {
              offsetof(SampleIdentity, writer_guid_),
          "CacheChange_t::write_params.sample_identity().writer_guid() (GUID_t)");
   LAYOUT(CC_WRITER_GUID, offsetof(CacheChange_t, writerGUID), "CacheChange_t::writerGUID (GUID_t)");
+  LAYOUT(CC_SEQUENCE, offsetof(CacheChange_t, sequenceNumber),
+         "CacheChange_t::sequenceNumber (SequenceNumber_t)");
+  LAYOUT(SNS_SIZE, sizeof(SequenceNumberSet_t), "sizeof(SequenceNumberSet_t)");
+  LAYOUT(SNS_BASE, offsetof(SequenceNumberSet_t, base_), "SequenceNumberSet_t's base (BitmapRange)");
+  LAYOUT(SW_GUID, offsetof(StatefulWriter, m_guid), "StatefulWriter's Endpoint::m_guid (GUID_t)");
+  LAYOUT(SW_SEPARATE_SENDING, offsetof(StatefulWriter, m_separateSendingEnabled),
+         "StatefulWriter's RTPSWriter::m_separateSendingEnabled (bool)");
   LAYOUT(CC_RELATED_WRITER_GUID,
          offsetof(CacheChange_t, write_params) + offsetof(WriteParams, related_sample_identity_) +
              offsetof(SampleIdentity, writer_guid_),
