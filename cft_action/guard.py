@@ -236,7 +236,7 @@ def writer_limits() -> dict[str, int]:
 
 #: The counters of cft_guard_heartbeat_count() in _guard_heartbeats.c, in its order.
 HEARTBEAT_COUNTERS = ('narrowed', 'widened', 'gaps_deferred', 'gaps_passed', 'piggyback_spaced',
-                      'gaps_merged', 'merges_dropped')
+                      'gaps_merged', 'merges_dropped', 'piggyback_merged')
 
 
 def heartbeat_counts() -> dict[str, int]:
@@ -253,17 +253,19 @@ def heartbeat_counts() -> dict[str, int]:
     writer's), the piggyback HEARTBEAT goes at most every 10 ms per writer
     (``CFT_GUARD_PIGGYBACK_MS``; ``off``: every write). In a write that judged kept readers only,
     the personal GAP and HEARTBEAT that Fast DDS sends a reader with a run of filtered-out changes
-    before its DATA, in a datagram of their own, go in the DATA's datagram
-    (``CFT_GUARD_MERGE_GAPS=0``: as Fast DDS). Keys:
+    before its DATA, in a datagram of their own, go in the DATA's datagram, and that DATA's
+    piggyback HEARTBEAT, the same again, is left out (``CFT_GUARD_MERGE_GAPS=0``: as Fast DDS).
+    Keys:
 
     - ``narrowed``: piggyback HEARTBEATs that went to the DATA's readers only;
     - ``widened``: those let through to all readers;
     - ``gaps_deferred``: per-write GAPs left for later (0 on 2.14.5, which sends none);
     - ``gaps_passed``: GAPs of the other kinds, sent as Fast DDS sends them;
-    - ``piggyback_spaced``: piggyback HEARTBEATs left out, within 10 ms of the writer's last.
+    - ``piggyback_spaced``: piggyback HEARTBEATs left out, within 10 ms of the writer's last;
     - ``gaps_merged``: personal GAPs sent in their DATA's datagram;
     - ``merges_dropped``: of those held back, dropped because no DATA of theirs followed (the
-      reader asks for the run with a NACK; always 0 but after an exception).
+      reader asks for the run with a NACK; always 0 but after an exception);
+    - ``piggyback_merged``: piggyback HEARTBEATs left out after a merged one in the same datagram.
 
     An empty dict when the guard is not preloaded.
     """

@@ -69,6 +69,8 @@ def test_filtered_readers_get_their_personal_gap_in_their_data(merged: bool) -> 
     counts = {k: after[k] - before[k] for k in after}
     assert counts['merges_dropped'] == 0, counts
     assert (counts['gaps_merged'] > 0) is merged, counts
+    # a full history's piggyback HEARTBEAT after a merged one would repeat it
+    assert (counts['piggyback_merged'] > 0) is merged, counts
     assert len(run.captured) == 2, run.captured
     for datagrams in run.captured.values():
         assert datagrams['data'] <= GOALS * ORDER + SLACK, run.captured

@@ -63,7 +63,9 @@
 //    follows (an exception; not seen) is dropped and counted: the reader learns of the run from the
 //    next HEARTBEAT and NACKs it, and the writer answers with a GAP. With separate sending (a
 //    datagram per reader for the DATA: Fast DDS's builtin discovery-server and security writers,
-//    never one with kept readers) the GAP goes at its HEARTBEAT, as in Fast DDS.
+//    never one with kept readers) the GAP goes at its HEARTBEAT, as in Fast DDS. The DATA's own
+//    piggyback HEARTBEAT (a full history's), which would repeat the merged one to the same readers
+//    with the same range, is left out.
 //
 // These members are exported and called through the PLT. A call from deliver_sample_to_network is
 // told by the return address, whose symbol dladdr names once per call site; one from the
@@ -101,7 +103,7 @@
 #define DELIVER_CALLER SW_PREFIX "25deliver_sample_to_network"
 
 enum { NARROWED = 0, WIDENED = 1, GAPS_DEFERRED = 2, GAPS_PASSED = 3, PIGGYBACK_SPACED = 4,
-       GAPS_MERGED = 5, MERGES_DROPPED = 6, COUNTERS = 7 };
+       GAPS_MERGED = 5, MERGES_DROPPED = 6, PIGGYBACK_MERGED = 7, COUNTERS = 8 };
 static unsigned long counters[COUNTERS];
 
 static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_RELAXED); }
@@ -314,6 +316,12 @@ static bool heartbeat_merged(void *self, void *group, bool final, bool livelines
                              uintptr_t return_address);
 #endif
 
+#if CFT_LAYOUT_KNOWN
+static bool heartbeat_merged(void *self, void *group, bool final, bool liveliness,
+                             uintptr_t return_address);
+static bool repeats_merged(void *self, void *group);
+#endif
+
 CFT_EXPORT void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final,
                                         bool liveliness) __asm__(SEND_HEARTBEAT);
 void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final,
@@ -325,6 +333,12 @@ void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final
   long interval = piggyback_ns();
   bool widened = widened_now;
   widened_now = false;
+#if CFT_LAYOUT_KNOWN
+  if (!widened && in_piggyback && repeats_merged(self, group)) {
+    count(PIGGYBACK_MERGED);
+    return;
+  }
+#endif
   if (interval > 0 && !widened && in_piggyback &&
       cft_write_judged_now() == (CFT_KEPT_READER | CFT_OTHER_READER) && !cft_status_write_now() &&
       !due(piggyback_slots, (uintptr_t)self, interval)) {
@@ -395,6 +409,8 @@ static __thread struct held held[HELD];
 static __thread int held_count;
 // The GAP just held back: the send_heartbeat_nts_ that follows it is its own.
 static __thread struct held *awaiting_heartbeat;
+// The group and writer of the HEARTBEAT that merge_held added before this DATA, if it added one.
+static __thread void *merged_group, *merged_writer;
 
 typedef bool (*add_gap_fn)(void *group, const void *seq, const void *set, const void *reader);
 static void *real_add_gap;
@@ -482,7 +498,20 @@ static void merge_held(void *group, const uint8_t *change) {
     real(group, h->seq, h->set, h->reader);
     last = h;
   }
-  if (last != NULL) send_heartbeat()(last->writer, 1, group, last->final, last->liveliness);
+  if (last != NULL) {
+    send_heartbeat()(last->writer, 1, group, last->final, last->liveliness);
+    merged_group = group;
+    merged_writer = last->writer;
+  }
+}
+
+// Whether the piggyback HEARTBEAT of `self` in `group` would repeat the one merge_held added before
+// the DATA it follows: the same writer, the same readers (the DATA's), the same range (the
+// change is in the history before either is built). A full history's piggyback follows every DATA.
+static bool repeats_merged(void *self, void *group) {
+  bool repeats = merged_group == group && merged_writer == self;
+  merged_group = merged_writer = NULL;
+  return repeats;
 }
 
 typedef bool (*add_data_fn)(void *group, const void *change, bool expects_inline_qos);
@@ -491,6 +520,7 @@ static void *real_add_data;
 CFT_EXPORT bool cft_add_data2(void *group, const void *change, bool expects_inline_qos)
     __asm__(ADD_DATA);
 bool cft_add_data2(void *group, const void *change, bool expects_inline_qos) {
+  merged_group = merged_writer = NULL;
   if (held_count > 0) merge_held(group, change);
   add_data_fn real = (add_data_fn)cft_guard_real(&real_add_data, FASTDDS2_SONAME, ADD_DATA);
   return real != NULL && real(group, change, expects_inline_qos);  // else unreachable
@@ -504,6 +534,7 @@ CFT_EXPORT bool cft_add_data_frag2(void *group, const void *change, uint32_t fra
                                    bool expects_inline_qos) __asm__(ADD_DATA_FRAG);
 bool cft_add_data_frag2(void *group, const void *change, uint32_t fragment,
                         bool expects_inline_qos) {
+  merged_group = merged_writer = NULL;
   if (held_count > 0) merge_held(group, change);
   add_data_frag_fn real =
       (add_data_frag_fn)cft_guard_real(&real_add_data_frag, FASTDDS2_SONAME, ADD_DATA_FRAG);
@@ -513,7 +544,8 @@ bool cft_add_data_frag2(void *group, const void *change, uint32_t fragment,
 
 // 0: piggyback HEARTBEATs kept to the DATA's readers; 1: let through to all readers;
 // 2: per-write GAPs left for later; 3: GAPs of the other kinds; 4: piggyback HEARTBEATs left out
-// (spaced); 5: personal GAPs sent in their DATA's datagram; 6: of those held back, dropped (stale).
+// (spaced); 5: personal GAPs sent in their DATA's datagram; 6: of those held back, dropped (stale);
+// 7: piggyback HEARTBEATs left out after a merged one.
 CFT_EXPORT unsigned long cft_guard_heartbeat_count(int which) {
   return which >= 0 && which < COUNTERS ? __atomic_load_n(&counters[which], __ATOMIC_RELAXED) : 0;
 }
