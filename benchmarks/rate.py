@@ -107,9 +107,12 @@ def publisher(topic: str, hz: float, size: int, tag: int) -> int:
     worker = threading.Thread(target=run, daemon=True)
     worker.start()
     print('READY', flush=True)
+    writer = next(bytes(info.endpoint_gid[:16]).hex()
+                  for info in node.get_publishers_info_by_topic(topic)
+                  if info.node_name == node.get_name())
     _commands({
         'stats': lambda _: {'sent': sent[0], 'matched': pub.get_subscription_count(),
-                            'cpu_s': _own_cpu_s()},
+                            'cpu_s': _own_cpu_s(), 'writer': writer},
         'wait': lambda n: {'matched': wait_until(lambda: pub.get_subscription_count() == int(n),
                                                  60.0)},
     })
@@ -235,6 +238,7 @@ class Run:
         self.topology = netns.Topology()
         self.env = {**os.environ, **netns.ENVIRONMENT, 'ROS_DOMAIN_ID': str(unused_domain())}
         self.procs: list[Proc] = []
+        self.namespaces: dict[str, str] = {}  # a process's name: its namespace
 
     def start(self, name: str, role: str, *role_args: object, server: bool = False) -> Proc:
         """Start a role in the server's namespace (guarded) or in a new client namespace."""
@@ -244,7 +248,19 @@ class Run:
         proc = Proc(name, self.topology.command(namespace, argv),
                     guard.environment(self.env) if server else self.env)
         self.procs.append(proc)
+        self.namespaces[name] = namespace
         proc.expect('READY', 90)
+        return proc
+
+    def capture(self, name: str, writer: str) -> Proc:
+        """A packet capture (harness/capture.py) in the namespace of the process ``name``, with
+        ``writer`` (a GUID in hex) as the one whose traffic it counts apart; stopped with the
+        clients."""
+        argv = python_module('harness.capture', netns.INTERFACE, writer, '')
+        proc = Proc(f'capture of {name}', self.topology.command(self.namespaces[name], argv),
+                    self.env)
+        self.procs.append(proc)
+        proc.expect('SNIFFING', 30)
         return proc
 
     def stop_clients(self) -> None:
@@ -276,6 +292,8 @@ def part_bytes(run: Run, pub: Proc, topic: str) -> dict[str, Any]:
     out['ideal_bytes_per_s'] = run.args.max_rate * out['bytes_per_message_plain']
     rate = out['kinds']['rate']['rx_bytes_per_s']
     out['rate_to_ideal'] = rate / out['ideal_bytes_per_s']
+    topic = out['kinds']['rate']['topic_bytes_per_s']
+    out['rate_topic_to_ideal'] = None if topic is None else topic / out['ideal_bytes_per_s']
     out['rate_to_plain'] = rate / plain['rx_bytes_per_s']
     out['rate_to_relay'] = rate / out['kinds']['relay']['rx_bytes_per_s']
     out['rate_to_relayed'] = rate / out['kinds']['relayed']['rx_bytes_per_s']
@@ -291,6 +309,9 @@ def bytes_received(run: Run, pub: Proc, topic: str, kinds: Sequence[str]) -> dic
                   server=True)
     subs = {kind: run.start(kind, 'subscriber', topic, kind, 1, args.max_rate) for kind in kinds}
     _matched(pub, len(kinds))  # the relayed subscriber's relay in its place
+    # The rate-limited subscriber's frames by writer: the topic's, and discovery's, which every
+    # participant receives whatever it subscribes to.
+    capture = run.capture('rate', pub.request_json('stats', 'STATS')['writer'])
     time.sleep(args.warmup)
     before = {k: (netns.interface_counters(p.pid), p.request_json('stats', 'STATS'))
               for k, p in subs.items()}
@@ -299,7 +320,8 @@ def bytes_received(run: Run, pub: Proc, topic: str, kinds: Sequence[str]) -> dic
     after = {k: (netns.interface_counters(p.pid), p.request_json('stats', 'STATS'))
              for k, p in subs.items()}
     seconds = time.monotonic() - started
-    out: dict[str, Any] = {'window_s': seconds, 'kinds': {}}
+    anatomy = capture.request_json('stop', 'RESULT', timeout=30)
+    out: dict[str, Any] = {'window_s': seconds, 'kinds': {}, 'rate_anatomy': anatomy}
     for kind in kinds:
         (net0, st0), (net1, st1) = before[kind], after[kind]
         assert net0 is not None and net1 is not None
@@ -309,6 +331,11 @@ def bytes_received(run: Run, pub: Proc, topic: str, kinds: Sequence[str]) -> dic
             'messages_per_s': (st1['received'][0] - st0['received'][0]) / seconds,
             'cpu_s_per_s': (st1['cpu_s'] - st0['cpu_s']) / seconds,
             'filtered_in': st1['filtered_in'][0] if st1['filtered_in'] else 'plain'}
+    # The capture ran a little longer than the window: its shares apply to the window's bytes.
+    topic = anatomy['feedback data']['bytes'] + anatomy['feedback gap/heartbeat']['bytes']
+    total = sum(category['bytes'] for category in anatomy.values())
+    rate = out['kinds']['rate']
+    rate['topic_bytes_per_s'] = rate['rx_bytes_per_s'] * topic / total if total else None
     run.stop_clients()
     return out
 
@@ -392,13 +419,16 @@ def markdown(results: dict[str, Any]) -> str:
                    f"{part['ideal_bytes_per_s']:,.0f} B/s; rate-limited / ideal "
                    f"{part['rate_to_ideal']:.2f}, / plain {part['rate_to_plain']:.4f}, / relay "
                    f"{part['rate_to_relay']:.4f}, / the relay's subscriber "
-                   f"{fmt(part.get('rate_to_relayed'), '.2f')}\n")
+                   f"{fmt(part.get('rate_to_relayed'), '.2f')}; the topic writer's frames "
+                   f"alone (a capture; the rest is discovery) / ideal "
+                   f"{fmt(part.get('rate_topic_to_ideal'), '.2f')}\n")
     alone = results.get('bytes_alone')
     if alone:
         mine = alone['kinds']['rate']
         out.append(f"`max_rate` alone on the writer: {mine['rx_bytes_per_s']:,.0f} B/s, "
                    f"{mine['messages_per_s']:.2f} messages/s, / ideal {alone['rate_to_ideal']:.2f}"
-                   f"\n")
+                   f", the topic writer's frames alone "
+                   f"{fmt(alone.get('rate_topic_to_ideal'), '.2f')}\n")
     rows = results.get('cpu')
     if rows:
         counts = sorted({r['subscribers'] for r in rows if r['subscribers']})
@@ -507,8 +537,11 @@ def main(argv: list[str]) -> int:
                         # readers make the writer send it a GAP and a heartbeat per message.
                         progress('part bytes: max_rate alone')
                         alone = bytes_received(run, pub, topic, ('rate',))
-                        alone['rate_to_ideal'] = (alone['kinds']['rate']['rx_bytes_per_s']
-                                                  / results['bytes']['ideal_bytes_per_s'])
+                        ideal = results['bytes']['ideal_bytes_per_s']
+                        mine = alone['kinds']['rate']
+                        alone['rate_to_ideal'] = mine['rx_bytes_per_s'] / ideal
+                        alone['rate_topic_to_ideal'] = (None if mine['topic_bytes_per_s'] is None
+                                                        else mine['topic_bytes_per_s'] / ideal)
                         results['bytes_alone'] = alone
                     else:
                         results['cpu'] = part_cpu(run, pub, topic)

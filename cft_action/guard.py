@@ -252,9 +252,10 @@ def heartbeat_counts() -> dict[str, int]:
     DDS). In a write that judged a reader the guard keeps and a plain one (not a status
     writer's), the piggyback HEARTBEAT goes at most every 10 ms per writer
     (``CFT_GUARD_PIGGYBACK_MS``; ``off``: every write). In a write that judged kept readers only,
-    the personal GAP and HEARTBEAT that Fast DDS sends a reader with a run of filtered-out changes
-    before its DATA, in a datagram of their own, go in the DATA's datagram, and that DATA's
-    piggyback HEARTBEAT, the same again, is left out (``CFT_GUARD_MERGE_GAPS=0``: as Fast DDS).
+    or whose change goes to one reader, the personal GAP and HEARTBEAT that Fast DDS sends a
+    reader with a run of filtered-out changes before its DATA, in a datagram of their own, go in
+    the DATA's datagram, and that DATA's piggyback HEARTBEAT, the same again, is left out
+    (``CFT_GUARD_MERGE_GAPS=0``: as Fast DDS).
     Keys:
 
     - ``narrowed``: piggyback HEARTBEATs that went to the DATA's readers only;

@@ -40,7 +40,9 @@ def test_a_full_history_sends_filtered_readers_no_heartbeat_per_foreign_write() 
     counts = {k: after[k] - before[k] for k in after}
     assert counts['narrowed'] > 0, counts  # the history was full, and the guard narrowed it
     assert counts['piggyback_spaced'] > 0, counts  # writes within 10 ms of a HEARTBEAT sent none
-    assert counts['gaps_merged'] == 0, counts  # every write judged the plain reader too
+    # Each feedback write goes to the plain reader too: only replies, each to its requester
+    # alone (goal and result, per goal), carry their reader's GAP in their DATA.
+    assert counts['gaps_merged'] <= 2 * GOALS * len(clients), counts
     # The port of each client's participant: the plain one got DATA for every write.
     captured = run.captured
     writes = GOALS * ORDER * len(clients)

@@ -94,6 +94,10 @@ def test_max_rate_per_publisher(ros):
                 # at most one per 1/HZ (the first comes at once), and the first after each interval
                 assert 0.9 * hz * seconds <= counts[index] <= hz * seconds + 1, (mode, counts)
             assert_where(ros, subscription, mode)
+        for child in runs['guarded'][1]:
+            # the subscriber alone on the writer: its GAP for the withheld run rides in the DATA
+            counts = child.request_json('heartbeats', 'HEARTBEATS')
+            assert counts['gaps_merged'] > 0 and counts['merges_dropped'] == 0, counts
     finally:
         for _, children in runs.values():
             for child in children:

@@ -13,8 +13,10 @@ Usage: ``python -m tests.helpers.publisher PREFIX [DEPTH]``: reliable, keep-last
              replies SENT N
   active T   replies ACTIVE A M: of the M matched subscriptions of topic T, A would take a
              message published now (cft_action.active_subscription_count)
+  heartbeats replies HEARTBEATS {...}: cft_action.guard.heartbeat_counts() in this process
 """
 
+import json
 import sys
 import time
 
@@ -23,7 +25,7 @@ from rclpy.node import Node
 from rclpy.qos import QoSProfile, ReliabilityPolicy
 from std_msgs.msg import Float64, Int32, String
 
-from cft_action import active_subscription_count
+from cft_action import active_subscription_count, guard
 from harness.polling import TIMEOUT, wait_until
 
 WORDS = ('hello', 'world', 'hello world')
@@ -77,6 +79,8 @@ def main() -> None:
             publisher = publishers[argument][0]
             print(f'ACTIVE {active_subscription_count(publisher)} '
                   f'{publisher.get_subscription_count()}', flush=True)
+        elif command == 'heartbeats':
+            print(f'HEARTBEATS {json.dumps(guard.heartbeat_counts())}', flush=True)
         elif command == 'steady':
             hz, seconds, base = argument.split()
             publisher, make = publishers['ints']

@@ -467,10 +467,11 @@ CFT_EXPORT bool cft_is_relevant2(const void *self, const void *change, const voi
     __asm__(REL2);
 bool cft_is_relevant2(const void *self, const void *change, const void *reader_guid) {
   struct family *f = ready(0);
-  if (f->state == CFT_GUARD_ACTIVE) {
+  bool active = f->state == CFT_GUARD_ACTIVE;
+  if (active) {
     int verdict = cft_filter_relevance(self, change, reader_guid);
     cft_write_judged(verdict >= 0 ? CFT_KEPT_READER : CFT_OTHER_READER);
-    if (verdict >= 0) return verdict == 1;
+    if (verdict >= 0) return cft_write_passes(verdict == 1);
     if (cft_replies_relevance(change, reader_guid) == 0) return false;
   }
   relevant_fn real = (relevant_fn)f->real[FN_REL];
@@ -480,7 +481,8 @@ bool cft_is_relevant2(const void *self, const void *change, const void *reader_g
     missing(f, FN_REL);
     return true;
   }
-  return real(self, change, reader_guid);
+  bool passed = real(self, change, reader_guid);
+  return active ? cft_write_passes(passed) : passed;
 }
 
 // DataWriterImpl::guid() of Fast DDS 2.x: a reference to the writer's GUID_t (16 bytes).

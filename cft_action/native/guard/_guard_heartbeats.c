@@ -50,7 +50,8 @@
 //    HEARTBEAT to that reader alone, in a datagram of their own (it switches the message group's
 //    sender to the reader and back, which flushes it), then the DATA: a filtered client got one per
 //    own sample that follows others' (160 B of UDP payload; in the DATA's datagram they take 64 B,
-//    as a capture on loopback showed). In a write that judged kept readers only, not a status
+//    as a capture on loopback showed). In a write that judged kept readers only, or whose change
+//    goes to one reader (a rate-limited subscriber's, alone on the writer), not a status
 //    writer's, the definitions of add_gap and send_heartbeat_nts_ below hold both back on the
 //    thread, and add_data (add_data_frag) of the same group, writer and change adds them before its
 //    DATA, with one HEARTBEAT after all the GAPs held: INFO_DST scopes each GAP to its reader, the
@@ -433,7 +434,8 @@ CFT_EXPORT bool cft_add_gap2(void *group, const void *seq, const void *set, cons
     __asm__(ADD_GAP);
 bool cft_add_gap2(void *group, const void *seq, const void *set, const void *reader) {
   if (merge_on() && caller_of((uintptr_t)__builtin_return_address(0)) == DELIVER &&
-      cft_write_judged_now() == CFT_KEPT_READER && !cft_status_write_now()) {
+      (cft_write_judged_now() == CFT_KEPT_READER || cft_write_passed_now() == 1) &&
+      !cft_status_write_now()) {
     if (held_count > 0 && (held[0].group != group ||
                            memcmp(held[0].set + SNS_BASE, (const uint8_t *)set + SNS_BASE,
                                   SEQUENCE_SIZE) != 0))

@@ -306,6 +306,7 @@ void cft_status_frame_open(struct cft_status_frame *f) {
   f->overflow = false;
   f->judged = false;
   f->asked = 0;
+  f->passed = 0;
   frame = f;
 }
 
@@ -318,6 +319,13 @@ void cft_write_judged(int reader) {
 }
 
 int cft_write_judged_now(void) { return frame != NULL ? frame->asked : 0; }
+
+bool cft_write_passes(bool passed) {
+  if (frame != NULL && passed) frame->passed++;
+  return passed;
+}
+
+int cft_write_passed_now(void) { return frame != NULL ? frame->passed : 0; }
 
 static bool owed(void) {
   if (frame == NULL || asking == NULL) return false;

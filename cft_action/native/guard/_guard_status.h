@@ -38,6 +38,7 @@ struct cft_status_frame {
   bool overflow;                   // more than CFT_STATUS_FRAME_READERS: every reader is owed
   bool judged;                     // a kept status reader's verdict ran in this write
   int asked;                       // CFT_KEPT_READER | CFT_OTHER_READER: whose relevance it asked
+  int passed;                      // the readers it found the change relevant for
   const void *readers[CFT_STATUS_FRAME_READERS];  // ReaderProxy objects, compared, never read
 };
 void cft_status_frame_open(struct cft_status_frame *frame);
@@ -55,5 +56,10 @@ bool cft_status_write_now(void);
 #define CFT_OTHER_READER 2
 void cft_write_judged(int reader);
 int cft_write_judged_now(void);
+// How many readers the write on this thread found its change relevant for: _guard.c's is_relevant
+// counts each verdict (returning it), _guard_heartbeats.c merges a personal GAP into a DATA that
+// goes to that reader alone.
+bool cft_write_passes(bool passed);
+int cft_write_passed_now(void);
 
 #endif  // CFT_ACTION_GUARD_STATUS_H_
