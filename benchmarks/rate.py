@@ -292,8 +292,8 @@ def part_bytes(run: Run, pub: Proc, topic: str) -> dict[str, Any]:
     out['ideal_bytes_per_s'] = run.args.max_rate * out['bytes_per_message_plain']
     rate = out['kinds']['rate']['rx_bytes_per_s']
     out['rate_to_ideal'] = rate / out['ideal_bytes_per_s']
-    topic = out['kinds']['rate']['topic_bytes_per_s']
-    out['rate_topic_to_ideal'] = None if topic is None else topic / out['ideal_bytes_per_s']
+    out['rate_topic_to_ideal'] = (out['kinds']['rate']['topic_bytes_per_s']
+                                  / out['ideal_bytes_per_s'])
     out['rate_to_plain'] = rate / plain['rx_bytes_per_s']
     out['rate_to_relay'] = rate / out['kinds']['relay']['rx_bytes_per_s']
     out['rate_to_relayed'] = rate / out['kinds']['relayed']['rx_bytes_per_s']
@@ -312,6 +312,7 @@ def bytes_received(run: Run, pub: Proc, topic: str, kinds: Sequence[str]) -> dic
     # The rate-limited subscriber's frames by writer: the topic's, and discovery's, which every
     # participant receives whatever it subscribes to.
     capture = run.capture('rate', pub.request_json('stats', 'STATS')['writer'])
+    captured_from = time.monotonic()
     time.sleep(args.warmup)
     before = {k: (netns.interface_counters(p.pid), p.request_json('stats', 'STATS'))
               for k, p in subs.items()}
@@ -321,6 +322,7 @@ def bytes_received(run: Run, pub: Proc, topic: str, kinds: Sequence[str]) -> dic
              for k, p in subs.items()}
     seconds = time.monotonic() - started
     anatomy = capture.request_json('stop', 'RESULT', timeout=30)
+    captured_s = time.monotonic() - captured_from
     out: dict[str, Any] = {'window_s': seconds, 'kinds': {}, 'rate_anatomy': anatomy}
     for kind in kinds:
         (net0, st0), (net1, st1) = before[kind], after[kind]
@@ -331,11 +333,9 @@ def bytes_received(run: Run, pub: Proc, topic: str, kinds: Sequence[str]) -> dic
             'messages_per_s': (st1['received'][0] - st0['received'][0]) / seconds,
             'cpu_s_per_s': (st1['cpu_s'] - st0['cpu_s']) / seconds,
             'filtered_in': st1['filtered_in'][0] if st1['filtered_in'] else 'plain'}
-    # The capture ran a little longer than the window: its shares apply to the window's bytes.
-    topic = anatomy['feedback data']['bytes'] + anatomy['feedback gap/heartbeat']['bytes']
-    total = sum(category['bytes'] for category in anatomy.values())
-    rate = out['kinds']['rate']
-    rate['topic_bytes_per_s'] = rate['rx_bytes_per_s'] * topic / total if total else None
+    # The capture spans the warm-up too: the topic's traffic is steady, discovery's is not.
+    topic_bytes = anatomy['feedback data']['bytes'] + anatomy['feedback gap/heartbeat']['bytes']
+    out['kinds']['rate']['topic_bytes_per_s'] = topic_bytes / captured_s
     run.stop_clients()
     return out
 
@@ -420,7 +420,7 @@ def markdown(results: dict[str, Any]) -> str:
                    f"{part['rate_to_ideal']:.2f}, / plain {part['rate_to_plain']:.4f}, / relay "
                    f"{part['rate_to_relay']:.4f}, / the relay's subscriber "
                    f"{fmt(part.get('rate_to_relayed'), '.2f')}; the topic writer's frames "
-                   f"alone (a capture; the rest is discovery) / ideal "
+                   f"alone (a capture from the warm-up on; the rest is discovery) / ideal "
                    f"{fmt(part.get('rate_topic_to_ideal'), '.2f')}\n")
     alone = results.get('bytes_alone')
     if alone:
@@ -540,8 +540,7 @@ def main(argv: list[str]) -> int:
                         ideal = results['bytes']['ideal_bytes_per_s']
                         mine = alone['kinds']['rate']
                         alone['rate_to_ideal'] = mine['rx_bytes_per_s'] / ideal
-                        alone['rate_topic_to_ideal'] = (None if mine['topic_bytes_per_s'] is None
-                                                        else mine['topic_bytes_per_s'] / ideal)
+                        alone['rate_topic_to_ideal'] = mine['topic_bytes_per_s'] / ideal
                         results['bytes_alone'] = alone
                     else:
                         results['cpu'] = part_cpu(run, pub, topic)
