@@ -86,13 +86,6 @@ void cft_fastdds_layout() {
              offsetof(SampleIdentity, writer_guid_),
          "CacheChange_t::write_params.sample_identity().writer_guid() (GUID_t)");
   LAYOUT(CC_WRITER_GUID, offsetof(CacheChange_t, writerGUID), "CacheChange_t::writerGUID (GUID_t)");
-  LAYOUT(CC_SEQUENCE, offsetof(CacheChange_t, sequenceNumber),
-         "CacheChange_t::sequenceNumber (SequenceNumber_t)");
-  LAYOUT(SNS_SIZE, sizeof(SequenceNumberSet_t), "sizeof(SequenceNumberSet_t)");
-  LAYOUT(SNS_BASE, offsetof(SequenceNumberSet_t, base_), "SequenceNumberSet_t's base (BitmapRange)");
-  LAYOUT(SW_GUID, offsetof(StatefulWriter, m_guid), "StatefulWriter's Endpoint::m_guid (GUID_t)");
-  LAYOUT(SW_SEPARATE_SENDING, offsetof(StatefulWriter, m_separateSendingEnabled),
-         "StatefulWriter's RTPSWriter::m_separateSendingEnabled (bool)");
   LAYOUT(CC_RELATED_WRITER_GUID,
          offsetof(CacheChange_t, write_params) + offsetof(WriteParams, related_sample_identity_) +
              offsetof(SampleIdentity, writer_guid_),
@@ -101,6 +94,13 @@ void cft_fastdds_layout() {
          offsetof(CacheChange_t, write_params) + offsetof(WriteParams, related_sample_identity_) +
              offsetof(SampleIdentity, sequence_number_),
          "CacheChange_t::write_params.related_sample_identity().sequence_number()");
+  LAYOUT(CC_SEQUENCE, offsetof(CacheChange_t, sequenceNumber),
+         "CacheChange_t::sequenceNumber (SequenceNumber_t)");
+  LAYOUT(SNS_SIZE, sizeof(SequenceNumberSet_t), "sizeof(SequenceNumberSet_t)");
+  LAYOUT(SNS_BASE, offsetof(SequenceNumberSet_t, base_), "SequenceNumberSet_t's base (BitmapRange)");
+  LAYOUT(SW_GUID, offsetof(StatefulWriter, m_guid), "StatefulWriter's Endpoint::m_guid (GUID_t)");
+  LAYOUT(SW_SEPARATE_SENDING, offsetof(StatefulWriter, m_separateSendingEnabled),
+         "StatefulWriter's RTPSWriter::m_separateSendingEnabled (bool)");
   LAYOUT(FSI_WRITER_GUID,
          offsetof(IContentFilter::FilterSampleInfo, sample_identity) +
              offsetof(SampleIdentity, writer_guid_),
