@@ -91,6 +91,16 @@
 #include "_guard_log.h"
 #include "_guard_status.h"
 
+// Part 4 reads these layouts of the headers the guard was built against; without them (no
+// headers, or a layout header made up by a test) its members are not defined.
+#if CFT_LAYOUT_KNOWN && defined(CC_SEQUENCE) && defined(CC_WRITER_GUID) && defined(SNS_SIZE) && \
+    defined(SNS_BASE) && defined(SW_GUID) && defined(SW_SEPARATE_SENDING) &&                   \
+    defined(CFT_LAYOUT_HAVE_SECURITY)
+#define MERGE_LAYOUT_KNOWN 1
+#else
+#define MERGE_LAYOUT_KNOWN 0
+#endif
+
 #define FASTDDS2_SONAME "libfastrtps.so.2.14"
 #define SW_PREFIX "_ZN8eprosima8fastrtps4rtps14StatefulWriter"
 #define SELECT_ALL                                                                             \
@@ -312,12 +322,12 @@ static struct writer_slot piggyback_slots[WRITER_SLOTS];
 typedef void (*send_heartbeat_fn)(void *self, size_t readers, void *group, bool final,
                                   bool liveliness);
 static void *real_send_heartbeat;
-#if CFT_LAYOUT_KNOWN
+#if MERGE_LAYOUT_KNOWN
 static bool heartbeat_merged(void *self, void *group, bool final, bool liveliness,
                              uintptr_t return_address);
 #endif
 
-#if CFT_LAYOUT_KNOWN
+#if MERGE_LAYOUT_KNOWN
 static bool heartbeat_merged(void *self, void *group, bool final, bool liveliness,
                              uintptr_t return_address);
 static bool repeats_merged(void *self, void *group);
@@ -327,14 +337,14 @@ CFT_EXPORT void cft_send_heartbeat_nts2(void *self, size_t readers, void *group,
                                         bool liveliness) __asm__(SEND_HEARTBEAT);
 void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final,
                              bool liveliness) {
-#if CFT_LAYOUT_KNOWN
+#if MERGE_LAYOUT_KNOWN
   if (heartbeat_merged(self, group, final, liveliness, (uintptr_t)__builtin_return_address(0)))
     return;
 #endif
   long interval = piggyback_ns();
   bool widened = widened_now;
   widened_now = false;
-#if CFT_LAYOUT_KNOWN
+#if MERGE_LAYOUT_KNOWN
   if (!widened && in_piggyback && repeats_merged(self, group)) {
     count(PIGGYBACK_MERGED);
     return;
@@ -353,7 +363,7 @@ void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final
 
 // ---- 4. the personal GAP and HEARTBEAT, in the DATA's datagram (CFT_GUARD_MERGE_GAPS) ----------
 // Without the headers' layouts nothing is held back: these members are then not interposed.
-#if CFT_LAYOUT_KNOWN
+#if MERGE_LAYOUT_KNOWN
 #define GROUP_PREFIX "_ZN8eprosima8fastrtps4rtps16RTPSMessageGroup"
 #define ADD_GAP                                                                                 \
   GROUP_PREFIX "7add_gapERKNS1_16SequenceNumber_tERKNS0_11BitmapRangeIS3_NS1_18SequenceNumberDiff" \
