@@ -2,6 +2,7 @@
 processes, guarded (the publisher decides) and not (this process's reader decides)."""
 
 import math
+import time
 from collections import Counter
 
 import pytest
@@ -208,7 +209,10 @@ def test_poll_needs_a_polled_subscription(ros):
 def test_the_action_clients_feedback_max_rate_is_per_goal(ros, mode):
     """Two goals of a client at ``feedback_max_rate=5``, beside a plain client's goal, each
     published at 100 Hz for 1.5 s: each limited goal's callback gets at most one per 0.2 s (the
-    first at once), the plain one every message; the results come as without a limit."""
+    first at once), the plain one every message; the results come as without a limit. The limit
+    counts from when messages are taken, so the bound is over the span of the callbacks: an
+    executor held up 0.2 s on a busy machine takes the rest of a goal's messages later (seen:
+    9 callbacks, two of them for messages published 10 ms apart)."""
     action = '/' + unique_name('fib_rate')
     server = action_server(action, 0.01, env=guard.environment() if mode == 'guarded' else None)
     try:
@@ -218,16 +222,23 @@ def test_the_action_clients_feedback_max_rate_is_per_goal(ros, mode):
             assert client.wait_for_server(timeout_sec=20)
             prove_feedback_path(ros.spin_until, client)
         received: dict[str, list[int]] = {'a': [], 'b': [], 'plain': []}
+        times: dict[str, list[float]] = {name: [] for name in received}
+
+        def record(message, name: str) -> None:
+            received[name].append(message.feedback.sequence[0])
+            times[name].append(time.monotonic())
+
         handles = {name: send(ros, limited if name != 'plain' else plain, 150,
-                              feedback_callback=lambda m, r=seen: r.append(m.feedback.sequence[0]))
-                   for name, seen in received.items()}
+                              feedback_callback=lambda m, n=name: record(m, n))
+                   for name in received}
         for handle in handles.values():
             assert result_of(ros, handle).status == GoalStatus.STATUS_SUCCEEDED
         ros.spin_for(0.3)
         assert len(received['plain']) == 150
         for name in 'ab':
-            ks = received[name]
-            assert ks and ks == sorted(ks) and 5 <= len(ks) <= 1.5 * 5 + 1, (name, ks)
+            ks, span = received[name], times[name][-1] - times[name][0]
+            # one at once, then at most one per 0.2 s; one more for a callback run late
+            assert ks == sorted(ks) and 3 <= len(ks) <= span * 5 + 2, (name, ks, span)
     finally:
         server.stop()
 
