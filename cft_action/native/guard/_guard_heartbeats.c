@@ -526,14 +526,20 @@ static bool repeats_merged(void *self, void *group) {
   return repeats;
 }
 
+// Before each DATA or DATA_FRAG: a HEARTBEAT merged for an earlier one is not this one's, and the
+// GAPs held for this one go first.
+static void before_data(void *group, const void *change) {
+  merged_group = merged_writer = NULL;
+  if (held_count > 0) merge_held(group, change);
+}
+
 typedef bool (*add_data_fn)(void *group, const void *change, bool expects_inline_qos);
 static void *real_add_data;
 
 CFT_EXPORT bool cft_add_data2(void *group, const void *change, bool expects_inline_qos)
     __asm__(ADD_DATA);
 bool cft_add_data2(void *group, const void *change, bool expects_inline_qos) {
-  merged_group = merged_writer = NULL;
-  if (held_count > 0) merge_held(group, change);
+  before_data(group, change);
   add_data_fn real = (add_data_fn)cft_guard_real(&real_add_data, FASTDDS2_SONAME, ADD_DATA);
   return real != NULL && real(group, change, expects_inline_qos);  // else unreachable
 }
@@ -546,8 +552,7 @@ CFT_EXPORT bool cft_add_data_frag2(void *group, const void *change, uint32_t fra
                                    bool expects_inline_qos) __asm__(ADD_DATA_FRAG);
 bool cft_add_data_frag2(void *group, const void *change, uint32_t fragment,
                         bool expects_inline_qos) {
-  merged_group = merged_writer = NULL;
-  if (held_count > 0) merge_held(group, change);
+  before_data(group, change);
   add_data_frag_fn real =
       (add_data_frag_fn)cft_guard_real(&real_add_data_frag, FASTDDS2_SONAME, ADD_DATA_FRAG);
   return real != NULL && real(group, change, fragment, expects_inline_qos);  // else unreachable
