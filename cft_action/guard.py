@@ -322,7 +322,7 @@ def reply_counts() -> dict[str, int]:
 
 #: The counters of cft_guard_status_count() in _guard_status.c, in its order.
 STATUS_COUNTERS = ('requests', 'implausible', 'verdicts', 'changed', 'owed', 'withheld',
-                   'unknown', 'malformed', 'resets', 'kept')
+                   'unknown', 'malformed', 'resets', 'kept', 'deferred')
 
 #: Environment variable that turns the status filter off (``off`` or ``0``).
 STATUS_ENV = 'CFT_GUARD_STATUS'
@@ -345,7 +345,9 @@ def status_counts() -> dict[str, int]:
     - ``malformed``: samples that did not read as a GoalStatusArray (passed);
     - ``resets``: times the record of requesters was full (32,768 goals) and started anew;
     - ``kept``: status readers the guard keeps (they are in ``filter_counts()['kept']`` too, and
-      their verdicts in its ``relevance_verdicts``).
+      their verdicts in its ``relevance_verdicts``);
+    - ``deferred``: owed samples not sent with the write: the client asks for the writer's latest
+      when a HEARTBEAT shows it one it lacks (``CFT_GUARD_DEFER_OWED=0`` sends them at once).
 
     An empty dict when the guard is not preloaded.
     """

@@ -370,7 +370,7 @@ class LoadRun:
             'published_at_goals': done['published'] - before['published'],
             'timed_out': done.get('timed_out', False),
             **{key: {k: v - before.get(key, {}).get(k, 0) for k, v in after.get(key, {}).items()}
-               for key in ('guard_filter', 'guard_heartbeats')},
+               for key in ('guard_filter', 'guard_heartbeats', 'guard_status')},
             'late_ticks': after['late_ticks'] - before['late_ticks'],
             'intervals': after['intervals'] - before['intervals'],
             'interval_s': after['interval_s'] - before['interval_s'],

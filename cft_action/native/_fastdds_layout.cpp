@@ -19,6 +19,7 @@
 #include <fastdds/rtps/history/ReaderHistory.h>
 #include <fastdds/rtps/reader/RTPSReader.h>
 #include <fastdds/rtps/reader/StatefulReader.h>
+#include <fastdds/rtps/writer/ChangeForReader.h>
 #include <fastdds/rtps/writer/StatefulWriter.h>
 #include <fastrtps/attributes/TopicAttributes.h>
 #include <cstddef>
@@ -113,6 +114,8 @@ void cft_fastdds_layout() {
   LAYOUT(RT_SIZE, sizeof(ReaderTimes), "sizeof(ReaderTimes)");
   LAYOUT(RT_RESPONSE_DELAY, offsetof(ReaderTimes, heartbeatResponseDelay),
          "ReaderTimes::heartbeatResponseDelay (Duration_t)");
+  LAYOUT(CFR_UNACKNOWLEDGED, eprosima::fastrtps::rtps::UNACKNOWLEDGED,
+         "ChangeForReaderStatus_t UNACKNOWLEDGED (a value)");
   LAYOUT(TOPIC_NAME, offsetof(TopicAttributes, topicName), "TopicAttributes::topicName");
   LAYOUT(DWQ_READER_FILTERS,
          offsetof(DataWriterQos, writer_resource_limits_) +

@@ -46,6 +46,24 @@
 // one write only, under the writer's mutex, so a pooled ReaderProxy reused for another reader
 // never meets a stale pointer.
 //
+// Owed samples are asked for. An owed sample rarely carries news: the reader's goals have the
+// status of the sample it was passed, which it has most likely received, only its acknowledgement
+// not yet back (in a burst of transitions the round trip is longer than the writes' spacing, and
+// a chain of owed samples went on to the burst's end: N = 16 clients x 4 goals, 59-251 status
+// samples per client where 12 changed its goals). So the owed change is relevant for the reader,
+// in its ReaderProxy, but not sent with the write: ReaderProxy::change_is_unsent (interposed) says
+// it is not unsent for such a reader, after ReaderProxy::from_unsent_to_status marked it
+// UNACKNOWLEDGED, as if sent and lost. The next HEARTBEAT that reaches the reader (the periodic
+// one, or a status write's widened one, _guard_heartbeats.c part 1) shows it a change it does not
+// have; it NACKs, and the writer sends the history's change (ReaderProxy::requested_changes_set
+// turns an UNACKNOWLEDGED change REQUESTED), or a GAP if it was replaced, whose successor is owed
+// in turn. A reader that did receive its sample has its goals' status all along; one that lost
+// it gets the history's change at that HEARTBEAT, as a plain reader gets a lost last sample.
+// Only in a write on this thread (a sent change, the NACK response, is not in one), and only for a
+// reliable reader whose change was unsent and never delivered (change_is_unsent says so, through
+// the flag that reactivates the periodic heartbeat). CFT_GUARD_DEFER_OWED=0 sends owed samples
+// with the write.
+//
 // The requesters' record holds REQUESTER_SLOTS / 2 goals; when it is full it is cleared, and the
 // goals taken before then count as anyone's (every kept reader is passed their changes) until the
 // server forgets them. A kept reader's record grows with its own goals only.
@@ -57,6 +75,7 @@
 // - The interposed Fast DDS members always call the real ones, found in the library that called
 //   them; rmw_take_request calls the next definition after the guard's.
 // - CFT_GUARD_STATUS=off (or 0) turns this file off: every status sample goes to every reader.
+// - An owed sample is deferred only where the headers gave CC_SEQUENCE and CFR_UNACKNOWLEDGED.
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -80,6 +99,15 @@
   "_ZNK8eprosima8fastrtps4rtps11ReaderProxy15change_is_ackedERKNS1_16SequenceNumber_tE"
 #define RTPS_IS_RELEVANT \
   "_ZNK8eprosima8fastrtps4rtps11ReaderProxy16rtps_is_relevantEPNS1_13CacheChange_tE"
+// change_is_unsent is const in 2.14.5 and not in 2.14.6 (it updates the run of removed irrelevant
+// changes there): two mangled names, one in each library.
+#define CHANGE_IS_UNSENT_TAIL \
+  "ReaderProxy16change_is_unsentERKNS1_16SequenceNumber_tERjRS3_S5_Rb"
+#define CHANGE_IS_UNSENT_CONST "_ZNK8eprosima8fastrtps4rtps11" CHANGE_IS_UNSENT_TAIL
+#define CHANGE_IS_UNSENT "_ZN8eprosima8fastrtps4rtps11" CHANGE_IS_UNSENT_TAIL
+#define FROM_UNSENT \
+  "_ZN8eprosima8fastrtps4rtps11ReaderProxy21from_unsent_to_statusERKNS1_16SequenceNumber_tE" \
+  "NS1_23ChangeForReaderStatus_tEbb"
 #define TAKE_REQUEST "rmw_take_request"
 
 #define STATUS_TOPIC_PREFIX "rt/"
@@ -95,6 +123,12 @@ _Static_assert(RMW_GUID_SIZE == 16, "rmw's writer_guid is not a 16-byte GUID");
 #else
 #define STATUS_LAYOUT_KNOWN 0
 #endif
+#if STATUS_LAYOUT_KNOWN && defined(CC_SEQUENCE) && defined(CFR_UNACKNOWLEDGED)
+#define DEFER_LAYOUT_KNOWN 1
+#else
+#define DEFER_LAYOUT_KNOWN 0
+#endif
+#define SEQUENCE_SIZE 8  // SequenceNumber_t: {int32 high, uint32 low}, as on the wire
 
 enum {
   REQUESTS,     // goal requests recorded with their requester
@@ -107,6 +141,7 @@ enum {
   MALFORMED,    // samples that did not read as a GoalStatusArray (passed)
   RESETS,       // times the requesters' record was full and cleared
   KEPT,         // status readers kept by _guard_filter.c (of its `kept`)
+  DEFERRED,     // owed changes not sent with the write, left for the reader to ask for
   COUNTERS
 };
 static unsigned long counters[COUNTERS];
@@ -121,6 +156,12 @@ static bool status_on(void) {
 static bool ends_with(const char *s, const char *tail) {
   size_t n = strlen(s), m = strlen(tail);
   return n >= m && strcmp(s + n - m, tail) == 0;
+}
+
+// CFT_GUARD_DEFER_OWED: on unless "off" or "0", where the status filter is on.
+static bool defer_on(void) {
+  static int on = -1;
+  return cft_guard_part_on(&on, "CFT_GUARD_DEFER_OWED", DEFER_LAYOUT_KNOWN) && status_on();
 }
 
 bool cft_status_keeps(const char *topic, const char *type) {
@@ -298,6 +339,7 @@ const struct cft_filter_grammar cft_guard_status_grammar = {status_compile, NULL
 // ---- owed samples: the write's frame ---------------------------------------------------------------
 static __thread struct cft_status_frame *frame;  // the innermost write on this thread
 static __thread const void *asking;              // the ReaderProxy whose rtps_is_relevant runs
+static __thread const uint8_t *asked_change;     // the CacheChange_t it asks about
 static bool status_readers;  // a status reader was kept: only then are removals looked at
 
 void cft_status_frame_open(struct cft_status_frame *f) {
@@ -307,6 +349,7 @@ void cft_status_frame_open(struct cft_status_frame *f) {
   f->judged = false;
   f->asked = 0;
   f->passed = 0;
+  f->deferred_count = 0;
   frame = f;
 }
 
@@ -371,16 +414,97 @@ void cft_change_has_been_removed(void *self, const void *sequence) {
   else cft_say("no real %s: the guard cannot forward it", CHANGE_REMOVED);
 }
 
-static void restore_asking(const void **saved) { asking = *saved; }
+struct asking_state {
+  const void *reader;
+  const uint8_t *change;
+};
+static void restore_asking(const struct asking_state *saved) {
+  asking = saved->reader;
+  asked_change = saved->change;
+}
 
 CFT_EXPORT bool cft_rtps_is_relevant(const void *self, void *change) __asm__(RTPS_IS_RELEVANT);
 bool cft_rtps_is_relevant(const void *self, void *change) {
   relevant_fn real = (relevant_fn)real_in_caller(&real_relevant, RTPS_IS_RELEVANT,
                                                  __builtin_return_address(0));
   if (real == NULL) return true;  // deliver, as to a reader without a filter
-  const void *saved __attribute__((cleanup(restore_asking))) = asking;
+  const struct asking_state saved __attribute__((cleanup(restore_asking))) = {asking, asked_change};
   asking = self;
+  asked_change = change;
   return real(self, change);
+}
+
+// An owed change for the reader asking: relevant, and not sent with this write.
+static void defer(void) {
+#if DEFER_LAYOUT_KNOWN
+  if (frame == NULL || asking == NULL || asked_change == NULL || !defer_on()) return;
+  if (frame->deferred_count == 0) {
+    memcpy(frame->sequence, asked_change + CC_SEQUENCE, SEQUENCE_SIZE);
+  } else if (memcmp(frame->sequence, asked_change + CC_SEQUENCE, SEQUENCE_SIZE) != 0) {
+    return;  // another change in the same write: not expected; it is sent
+  }
+  if (frame->deferred_count < CFT_STATUS_FRAME_READERS) frame->deferred[frame->deferred_count++] = asking;
+#endif
+}
+
+static bool deferred(const void *reader, const void *sequence) {
+  if (frame == NULL || frame->deferred_count == 0 ||
+      memcmp(frame->sequence, sequence, SEQUENCE_SIZE) != 0)
+    return false;
+  for (int i = 0; i < frame->deferred_count; i++)
+    if (frame->deferred[i] == reader) return true;
+  return false;
+}
+
+typedef bool (*unsent_fn)(void *self, const void *sequence, uint32_t *next_fragment, void *gap,
+                          const void *min_sequence, bool *reactivate_heartbeat);
+typedef void (*from_unsent_fn)(void *self, const void *sequence, int status, bool restart_nack,
+                               bool delivered);
+static void *real_unsent, *real_unsent_const, *real_from_unsent;
+
+// ReaderProxy::change_is_unsent, for each reader, as the writer delivers a change: false for a
+// reader it is deferred for, whose change becomes UNACKNOWLEDGED. Only for one the real member
+// found unsent and not yet delivered to a reliable reader (it raised `reactivate` for it).
+static bool change_is_unsent(void **cache, const char *name, const void *caller, void *self,
+                             const void *sequence, uint32_t *next_fragment, void *gap,
+                             const void *min_sequence, bool *reactivate) {
+  unsent_fn real = (unsent_fn)real_in_caller(cache, name, caller);
+  if (real == NULL) {
+    cft_say("no real %s: the guard cannot forward it", name);
+    return false;
+  }
+  bool reliable_first = false;
+  bool unsent = real(self, sequence, next_fragment, gap, min_sequence, &reliable_first);
+  *reactivate |= reliable_first;
+#if DEFER_LAYOUT_KNOWN
+  if (unsent && reliable_first && deferred(self, sequence)) {
+    from_unsent_fn to = (from_unsent_fn)real_in_caller(&real_from_unsent, FROM_UNSENT, caller);
+    if (to != NULL) {
+      to(self, sequence, CFR_UNACKNOWLEDGED, false, false);
+      count(DEFERRED);
+      return false;
+    }
+  }
+#endif
+  return unsent;
+}
+
+CFT_EXPORT bool cft_change_is_unsent_const(void *self, const void *sequence, uint32_t *next_fragment,
+                                           void *gap, const void *min_sequence, bool *reactivate)
+    __asm__(CHANGE_IS_UNSENT_CONST);
+bool cft_change_is_unsent_const(void *self, const void *sequence, uint32_t *next_fragment,
+                                void *gap, const void *min_sequence, bool *reactivate) {
+  return change_is_unsent(&real_unsent_const, CHANGE_IS_UNSENT_CONST, __builtin_return_address(0),
+                          self, sequence, next_fragment, gap, min_sequence, reactivate);
+}
+
+CFT_EXPORT bool cft_change_is_unsent(void *self, const void *sequence, uint32_t *next_fragment,
+                                     void *gap, const void *min_sequence, bool *reactivate)
+    __asm__(CHANGE_IS_UNSENT);
+bool cft_change_is_unsent(void *self, const void *sequence, uint32_t *next_fragment, void *gap,
+                          const void *min_sequence, bool *reactivate) {
+  return change_is_unsent(&real_unsent, CHANGE_IS_UNSENT, __builtin_return_address(0), self,
+                          sequence, next_fragment, gap, min_sequence, reactivate);
 }
 
 // ---- the verdict -----------------------------------------------------------------------------------
@@ -439,6 +563,7 @@ bool cft_status_verdict(void **program, const void *payload, const void *reader_
   bool passes = changed || is_owed;
   count(changed ? CHANGED : is_owed ? OWED : WITHHELD);
   if (!passes) return false;
+  if (!changed) defer();
   // The record becomes this sample's entries for the reader.
   unsigned capacity = r->capacity;
   while (capacity < 2 * relevant + 2) capacity *= 2;
@@ -469,7 +594,7 @@ void cft_status_reader_kept(void) {
 // ---- the C API, for ctypes -------------------------------------------------------------------------
 // In the order of the enum above: 0 requests recorded, 1 implausible request headers, 2 verdicts,
 // 3 passed (changed), 4 passed (owed), 5 withheld, 6 entries of unknown requesters, 7 malformed
-// samples, 8 resets of the requesters' record, 9 status readers kept.
+// samples, 8 resets of the requesters' record, 9 status readers kept, 10 owed changes deferred.
 CFT_EXPORT unsigned long cft_guard_status_count(int which) {
   return which >= 0 && which < COUNTERS ? __atomic_load_n(&counters[which], __ATOMIC_RELAXED) : 0;
 }

@@ -40,6 +40,11 @@ struct cft_status_frame {
   int asked;                       // CFT_KEPT_READER | CFT_OTHER_READER: whose relevance it asked
   int passed;                      // the readers it found the change relevant for
   const void *readers[CFT_STATUS_FRAME_READERS];  // ReaderProxy objects, compared, never read
+  // The readers passed this write's change only because they were owed it: it is not sent to
+  // them now (see _guard_status.c, "Owed samples are asked for").
+  int deferred_count;
+  unsigned char sequence[8];                        // the change's SequenceNumber_t
+  const void *deferred[CFT_STATUS_FRAME_READERS];  // ReaderProxy objects, compared, never read
 };
 void cft_status_frame_open(struct cft_status_frame *frame);
 void cft_status_frame_close(struct cft_status_frame *frame);
