@@ -322,7 +322,7 @@ def reply_counts() -> dict[str, int]:
 
 #: The counters of cft_guard_status_count() in _guard_status.c, in its order.
 STATUS_COUNTERS = ('requests', 'implausible', 'verdicts', 'changed', 'owed', 'withheld',
-                   'unknown', 'malformed', 'resets', 'kept', 'deferred')
+                   'unknown', 'malformed', 'resets', 'kept', 'deferred', 'heartbeat_periods')
 
 #: Environment variable that turns the status filter off (``off`` or ``0``).
 STATUS_ENV = 'CFT_GUARD_STATUS'
@@ -347,7 +347,10 @@ def status_counts() -> dict[str, int]:
     - ``kept``: status readers the guard keeps (they are in ``filter_counts()['kept']`` too, and
       their verdicts in its ``relevance_verdicts``);
     - ``deferred``: owed samples not sent with the write: the client asks for the writer's latest
-      when a HEARTBEAT shows it one it lacks (``CFT_GUARD_DEFER_OWED=0`` sends them at once).
+      when a HEARTBEAT shows it one it lacks (``CFT_GUARD_DEFER_OWED=0`` sends them at once);
+    - ``heartbeat_periods``: status writers that heartbeat every 100 ms while a client has not
+      acknowledged, instead of Fast DDS's 3 s (``CFT_GUARD_STATUS_HEARTBEAT_MS``: the period, or
+      ``off``).
 
     An empty dict when the guard is not preloaded.
     """

@@ -48,6 +48,7 @@ using eprosima::fastrtps::rtps::SerializedPayload_t;
 using eprosima::fastrtps::rtps::StatefulReader;
 using eprosima::fastrtps::rtps::StatefulWriter;
 using eprosima::fastrtps::rtps::WriteParams;
+using eprosima::fastrtps::rtps::WriterTimes;
 
 #define LAYOUT(name, value, what) asm volatile("\n->" #name " %c0 " what : : "i"((long)(value)))
 
@@ -99,6 +100,11 @@ void cft_fastdds_layout() {
          "CacheChange_t::sequenceNumber (SequenceNumber_t)");
   LAYOUT(SNS_SIZE, sizeof(SequenceNumberSet_t), "sizeof(SequenceNumberSet_t)");
   LAYOUT(SNS_BASE, offsetof(SequenceNumberSet_t, base_), "SequenceNumberSet_t's base (BitmapRange)");
+  LAYOUT(SW_SIZE, sizeof(StatefulWriter), "sizeof(StatefulWriter)");
+  LAYOUT(SW_TIMES, offsetof(StatefulWriter, m_times), "StatefulWriter::m_times (WriterTimes)");
+  LAYOUT(WT_SIZE, sizeof(WriterTimes), "sizeof(WriterTimes)");
+  LAYOUT(WT_HEARTBEAT_PERIOD, offsetof(WriterTimes, heartbeatPeriod),
+         "WriterTimes::heartbeatPeriod (Duration_t)");
   LAYOUT(SW_GUID, offsetof(StatefulWriter, m_guid), "StatefulWriter's Endpoint::m_guid (GUID_t)");
   LAYOUT(SW_SEPARATE_SENDING, offsetof(StatefulWriter, m_separateSendingEnabled),
          "StatefulWriter's RTPSWriter::m_separateSendingEnabled (bool)");

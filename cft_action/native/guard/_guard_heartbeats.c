@@ -285,6 +285,7 @@ CFT_EXPORT void cft_select_all_readers_nts2(void *self, void *group, void *locat
     __asm__(SELECT_ALL);
 void cft_select_all_readers_nts2(void *self, void *group, void *locator_selector) {
   long interval = heartbeat_all_ns();
+  if (cft_status_write_now()) cft_status_writer(self);
   if (interval == NEVER && cft_status_write_now()) interval = STATUS_HEARTBEAT_ALL_MS * 1000000L;
   if (interval >= 0 && in_piggyback) {
     if (interval == NEVER || !due(widened_slots, (uintptr_t)self, interval)) {

@@ -64,6 +64,16 @@
 // the flag that reactivates the periodic heartbeat). CFT_GUARD_DEFER_OWED=0 sends owed samples
 // with the write.
 //
+// The status writer heartbeats every STATUS_HEARTBEAT_MS (100) while a reader has not
+// acknowledged, instead of Fast DDS's 3 s: that HEARTBEAT is what makes a reader that lost its
+// sample ask for the writer's latest (a plain reader gets the burst's next sample anyway). Set with
+// StatefulWriter::updateTimes (exported, public; the writer's mutex, recursive, is held by the
+// write) on the writer of a status write that judged a kept reader (_guard_heartbeats.c calls
+// cft_status_writer with it), once per writer: its vtable pointer must be StatefulWriter's, its
+// m_times found as native/_endpoint_times.h says (the headers' offset, or up to 64 B past it in a
+// security build) with a period that reads as one. CFT_GUARD_STATUS_HEARTBEAT_MS sets the period
+// (1 to 3000 ms; `off` leaves Fast DDS's).
+//
 // The requesters' record holds REQUESTER_SLOTS / 2 goals; when it is full it is cleared, and the
 // goals taken before then count as anyone's (every kept reader is passed their changes) until the
 // server forgets them. A kept reader's record grows with its own goals only.
@@ -87,6 +97,7 @@
 #include <string.h>
 
 #include "_cdr.h"
+#include "_endpoint_times.h"
 #include "_fastdds_layout.h"
 #include "_filter_class.h"
 #include "_guard.h"
@@ -129,6 +140,18 @@ _Static_assert(RMW_GUID_SIZE == 16, "rmw's writer_guid is not a 16-byte GUID");
 #define DEFER_LAYOUT_KNOWN 0
 #endif
 #define SEQUENCE_SIZE 8  // SequenceNumber_t: {int32 high, uint32 low}, as on the wire
+#if STATUS_LAYOUT_KNOWN && defined(SW_SIZE) && defined(SW_TIMES) && defined(WT_SIZE) && \
+    defined(WT_HEARTBEAT_PERIOD)
+#define WRITER_TIMES_KNOWN 1
+#else
+#define WRITER_TIMES_KNOWN 0
+#endif
+#define FASTDDS2_SONAME "libfastrtps.so.2.14"
+#define WRITER_UPDATE_TIMES \
+  "_ZN8eprosima8fastrtps4rtps14StatefulWriter11updateTimesERKNS1_11WriterTimesE"
+#define WRITER_VTABLE "_ZTVN8eprosima8fastrtps4rtps14StatefulWriterE"
+#define WRITER_TIMES_VTABLE "_ZTVN8eprosima8fastrtps4rtps11WriterTimesE"
+#define STATUS_HEARTBEAT_MS 100
 
 enum {
   REQUESTS,     // goal requests recorded with their requester
@@ -142,6 +165,7 @@ enum {
   RESETS,       // times the requesters' record was full and cleared
   KEPT,         // status readers kept by _guard_filter.c (of its `kept`)
   DEFERRED,     // owed changes not sent with the write, left for the reader to ask for
+  HEARTBEATS,   // status writers given STATUS_HEARTBEAT_MS
   COUNTERS
 };
 static unsigned long counters[COUNTERS];
@@ -585,6 +609,81 @@ bool cft_status_verdict(void **program, const void *payload, const void *reader_
   return true;
 }
 
+// ---- the status writer's heartbeat period ---------------------------------------------------------
+// CFT_GUARD_STATUS_HEARTBEAT_MS in ns: 0 for `off`, else 1 to 3000 ms (default STATUS_HEARTBEAT_MS).
+static long status_heartbeat_ns(void) {
+  static long period = -1;  // -1: not read yet
+  long v = __atomic_load_n(&period, __ATOMIC_RELAXED);
+  if (v >= 0) return v;
+  const char *text = getenv("CFT_GUARD_STATUS_HEARTBEAT_MS");
+  char *end = NULL;
+  long ms = text != NULL && text[0] != '\0' ? strtol(text, &end, 10) : STATUS_HEARTBEAT_MS;
+  if (text != NULL && strcmp(text, "off") == 0) {
+    v = 0;
+  } else if (end != NULL && (*end != '\0' || ms < 1 || ms > 3000)) {
+    cft_say("CFT_GUARD_STATUS_HEARTBEAT_MS=%.40s is not off or a number of ms from 1 to 3000; "
+            "using %d", text, STATUS_HEARTBEAT_MS);
+    v = STATUS_HEARTBEAT_MS * 1000000L;
+  } else {
+    v = ms * 1000000L;
+  }
+  __atomic_store_n(&period, v, __ATOMIC_RELAXED);
+  return v;
+}
+
+#define SEEN_WRITERS 64
+static const void *seen_writers[SEEN_WRITERS];  // looked at once each (a reused address is not)
+static int seen_count;
+static pthread_mutex_t seen_lock = PTHREAD_MUTEX_INITIALIZER;
+
+static bool first_sight(const void *writer) {
+  pthread_mutex_lock(&seen_lock);
+  bool first = seen_count < SEEN_WRITERS;
+  for (int i = 0; i < seen_count && first; i++) first = seen_writers[i] != writer;
+  if (first) seen_writers[seen_count++] = writer;
+  pthread_mutex_unlock(&seen_lock);
+  return first;
+}
+
+typedef void (*writer_update_times_fn)(void *writer, const void *times);
+static void *real_writer_update_times, *writer_vtable;
+
+void cft_status_writer(void *writer) {
+#if WRITER_TIMES_KNOWN
+  long period = status_heartbeat_ns();
+  if (period == 0 || !status_on() || !first_sight(writer)) return;
+  writer_update_times_fn update = (writer_update_times_fn)cft_guard_real(
+      &real_writer_update_times, FASTDDS2_SONAME, WRITER_UPDATE_TIMES);
+  const uint8_t *vtable = cft_guard_real(&writer_vtable, FASTDDS2_SONAME, WRITER_VTABLE);
+  if (update == NULL || vtable == NULL ||
+      *(const uintptr_t *)writer != (uintptr_t)(vtable + CFT_VTABLE_START)) {
+    cft_say("a status writer is not a StatefulWriter as the guard knows it: it heartbeats as "
+            "Fast DDS does");
+    return;
+  }
+  int found;
+  uintptr_t member = cft_endpoint_times((uintptr_t)writer, SW_SIZE, SW_TIMES, WT_SIZE,
+                                        WRITER_TIMES_VTABLE, &found);
+  struct cft_duration current;
+  if (member != 0) memcpy(&current, (const void *)(member + WT_HEARTBEAT_PERIOD), sizeof current);
+  if (member == 0 || current.seconds < 0 || current.nanosec >= 1000000000u) {
+    cft_say("a status writer's times are not where the guard looks (%d found): it heartbeats as "
+            "Fast DDS does", found);
+    return;
+  }
+  if ((long)current.seconds * 1000000000L + current.nanosec <= period) return;
+  _Alignas(16) unsigned char times[WT_SIZE];
+  memcpy(times, (const void *)member, sizeof times);
+  struct cft_duration wanted = {(int32_t)(period / 1000000000L),
+                                (uint32_t)(period % 1000000000L)};
+  memcpy(times + WT_HEARTBEAT_PERIOD, &wanted, sizeof wanted);
+  update(writer, times);
+  count(HEARTBEATS);
+#else
+  (void)writer;
+#endif
+}
+
 // Called by _guard_filter.c when it keeps a status reader: removals are looked at from then on.
 void cft_status_reader_kept(void) {
   __atomic_store_n(&status_readers, true, __ATOMIC_RELAXED);
@@ -594,7 +693,8 @@ void cft_status_reader_kept(void) {
 // ---- the C API, for ctypes -------------------------------------------------------------------------
 // In the order of the enum above: 0 requests recorded, 1 implausible request headers, 2 verdicts,
 // 3 passed (changed), 4 passed (owed), 5 withheld, 6 entries of unknown requesters, 7 malformed
-// samples, 8 resets of the requesters' record, 9 status readers kept, 10 owed changes deferred.
+// samples, 8 resets of the requesters' record, 9 status readers kept, 10 owed changes deferred,
+// 11 status writers given the shorter heartbeat period.
 CFT_EXPORT unsigned long cft_guard_status_count(int which) {
   return which >= 0 && which < COUNTERS ? __atomic_load_n(&counters[which], __ATOMIC_RELAXED) : 0;
 }

@@ -25,6 +25,10 @@ bool cft_status_keeps(const char *topic, const char *type);
 // which the verdict may move (realloc) as it grows.
 bool cft_status_verdict(void **record, const void *payload, const void *reader_guid);
 
+// The StatefulWriter of a write that judged a kept status reader (cft_status_write_now), as
+// _guard_heartbeats.c sees it: heartbeats every CFT_GUARD_STATUS_HEARTBEAT_MS from now on.
+void cft_status_writer(void *writer);
+
 // _guard_filter.c kept a status reader: from now on the writes' removals are looked at.
 void cft_status_reader_kept(void);
 

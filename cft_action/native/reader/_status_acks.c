@@ -39,6 +39,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "_endpoint_times.h"
 #include "_fastdds_layout.h"
 #include "_filter_class.h"
 #include "_registration.h"
@@ -49,10 +50,7 @@
 #define UPDATE_TIMES "_ZN8eprosima8fastrtps4rtps14StatefulReader11updateTimesERKNS1_11ReaderTimesE"
 #define READER_VTABLE "_ZTVN8eprosima8fastrtps4rtps14StatefulReaderE"
 #define TIMES_VTABLE "_ZTVN8eprosima8fastrtps4rtps11ReaderTimesE"
-// An Itanium vtable pointer points past the vtable's offset-to-top and typeinfo words.
-#define VTABLE_START (2 * sizeof(void *))
 #define STATUS_SUFFIX "/_action/status"
-#define MAX_MOVE 64
 #define STATUS_ACK_DELAY_NS 0
 
 typedef bool (*update_times_fn)(void *reader, const void *times);
@@ -66,20 +64,6 @@ static __thread char refused[160];   // why the last status reader on this threa
 static update_times_fn update_times;
 static uintptr_t reader_vptr;
 
-// Fast DDS 2.14's Duration_t: seconds, then nanoseconds.
-struct duration {
-  int32_t seconds;
-  uint32_t nanosec;
-};
-
-// Whether `word` points where an object's vtable pointer points in a ReaderTimes vtable.
-static bool is_times_vptr(uintptr_t word) {
-  Dl_info info;
-  return dladdr((void *)word, &info) && info.dli_sname != NULL &&
-         strcmp(info.dli_sname, TIMES_VTABLE) == 0 &&
-         (uintptr_t)info.dli_saddr + VTABLE_START == word;
-}
-
 static bool ends_with(const char *text, const char *suffix) {
   size_t length = strnlen(text, STRING255_LENGTH), tail = strlen(suffix);
   return length < STRING255_LENGTH && length > tail && strcmp(text + length - tail, suffix) == 0;
@@ -92,21 +76,15 @@ static uintptr_t times_member(uintptr_t reader) {
     snprintf(refused, sizeof refused, "the status reader is not a StatefulReader");
     return 0;
   }
-  int found = 0;
-  uintptr_t member = 0;
-  for (uintptr_t move = 0; move <= MAX_MOVE && SR_TIMES + move + RT_SIZE <= SR_SIZE; move += 8) {
-    if (is_times_vptr(*(const uintptr_t *)(reader + SR_TIMES + move))) {
-      found++;
-      member = reader + SR_TIMES + move;
-    }
-  }
-  if (found != 1) {
+  int found;
+  uintptr_t member = cft_endpoint_times(reader, SR_SIZE, SR_TIMES, RT_SIZE, TIMES_VTABLE, &found);
+  if (member == 0) {
     snprintf(refused, sizeof refused,
              "the status reader's times are not at exactly one offset near the headers' (%d "
              "found): the loaded Fast DDS has another StatefulReader layout", found);
     return 0;
   }
-  struct duration delay;
+  struct cft_duration delay;
   memcpy(&delay, (const void *)(member + RT_RESPONSE_DELAY), sizeof delay);
   if (delay.seconds < 0 || delay.seconds > 1 || delay.nanosec >= 1000000000u) {
     snprintf(refused, sizeof refused, "the status reader's response delay does not read as one");
@@ -127,7 +105,7 @@ void cft_status_acks_registering(void *reader, const char *topic_name,
   if (member == 0) return;
   _Alignas(16) unsigned char times[RT_SIZE];
   memcpy(times, (const void *)member, sizeof times);
-  struct duration delay = {0, STATUS_ACK_DELAY_NS};
+  struct cft_duration delay = {0, STATUS_ACK_DELAY_NS};
   memcpy(times + RT_RESPONSE_DELAY, &delay, sizeof delay);
   update_times(reader, times);
   adjusted_here++;
@@ -143,7 +121,7 @@ static int install(struct cft_install *once) {
   int status;
   if (cft_resolve(once, FASTRTPS_SONAME, names, 2, resolved, &status) == NULL) return status;
   update_times = (update_times_fn)resolved[0];
-  reader_vptr = (uintptr_t)resolved[1] + VTABLE_START;
+  reader_vptr = (uintptr_t)resolved[1] + CFT_VTABLE_START;
   if ((status = cft_registration_install(once)) < 0) return status;
   __atomic_store_n(&armed, true, __ATOMIC_RELEASE);
   return 0;
