@@ -75,6 +75,9 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                         help="'off': the server runs without `cft-action guard`, as the server of "
                              'someone who only swapped a client import')
     add_server_feedback_depth(parser)
+    parser.add_argument('--loss', type=float, default=0.0,
+                        help='percent of the server\'s packets to each client dropped on the way '
+                             '(tc netem on its bridge port; needs network namespaces)')
     parser.add_argument('--drain-timeout', type=float, default=300.0,
                         help='seconds a phase may take after its goals finished')
     parser.add_argument('--goals-timeout', type=float, default=None,
@@ -136,7 +139,7 @@ def run(args: argparse.Namespace) -> Path:
             order=max(1, round(args.duration * point['rate_hz'])), pad=SIZES[point['size']],
             network=args.network, drain_timeout=args.drain_timeout,
             goals_timeout=args.goals_timeout, guarded=args.guard == 'on',
-            server_feedback_depth=args.server_feedback_depth)
+            server_feedback_depth=args.server_feedback_depth, loss_percent=args.loss)
         progress(f'point {i}/{len(points)}: N={spec.clients} M={spec.goals} '
                  f'{spec.rate_hz:g} Hz {point["size"]}')
         point_started = time.monotonic()

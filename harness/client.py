@@ -209,6 +209,7 @@ class LoadClient:
         self.send_s: Optional[float] = None
         self.last_response_s: Optional[float] = None
         self.last_callback_s: Optional[float] = None
+        self.terminal_s: Optional[float] = None  # when the status topic ended the last handle
         self.start_cpu = 0.0
         self.start_threads: dict[str, float] = {}
         self.start_counters: dict[str, Any] = {}
@@ -276,6 +277,11 @@ class LoadClient:
         """Goals that reached a terminal status, or were rejected."""
         return self.rejected + sum(h.status in _TERMINAL for h in self.handles)
 
+    def note_terminal(self) -> None:
+        """Record when every goal handle first had a terminal status (called after each spin)."""
+        if self.terminal_s is None and self.started and self.goals_done() == self.goals:
+            self.terminal_s = time.monotonic() - self.started
+
     def progress(self) -> dict[str, Any]:
         """The counters that tell the orchestrator whether data is still arriving."""
         status = {k: v - self.start_status.get(k, 0) for k, v in self.client.status_counts.items()}
@@ -297,7 +303,8 @@ class LoadClient:
                                  in procstat.thread_cpu_s(os.getpid()).items()},
                 'status_max_entries': self.client.status_max_entries,
                 'send_s': self.send_s, 'last_response_s': self.last_response_s,
-                'last_callback_s': self.last_callback_s, **memory_kb(),
+                'last_callback_s': self.last_callback_s, 'terminal_s': self.terminal_s,
+                **memory_kb(),
                 'latency_us': self.latency_us, **counters}
 
     def goal_counts(self) -> dict[str, int]:
@@ -363,6 +370,7 @@ def main() -> None:
     running = True
     while running:
         executor.spin_once(timeout_sec=1.0)
+        load.note_terminal()
         while not commands.empty():
             command = commands.get_nowait()
             if command == 'go':

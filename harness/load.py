@@ -101,6 +101,8 @@ class LoadSpec:
         many seconds.
     :ivar server_feedback_depth: the server's feedback writer alone keeps this many samples
         (rclpy's default is 10); None: as every queue (:func:`queue_depth`).
+    :ivar loss_percent: with namespaces, the share of the server's packets to each client that
+        are dropped on the way (``tc netem``); 0: none.
     """
 
     clients: int = 8
@@ -118,6 +120,7 @@ class LoadSpec:
     result_timeout_s: int = RESULT_TIMEOUT_S
     goal_interval_s: float = 0.0
     server_feedback_depth: Optional[int] = None
+    loss_percent: float = 0.0
 
     @property
     def total_goals(self) -> int:
@@ -259,7 +262,7 @@ class LoadRun:
             argv = python_module('harness.client', self.action, role, spec.goals, spec.order,
                                  self.depth, spec.goal_interval_s)
             if self.topology:
-                argv = self.topology.command(self.topology.add_client(), argv)
+                argv = self.topology.command(self.topology.add_client(spec.loss_percent), argv)
             clients.append(Proc(name, argv, self.env))
         return clients
 

@@ -85,8 +85,9 @@ class Topology:
         self.namespaces.append(name)
         _ip('-n', name, 'link', 'set', 'lo', 'up')
 
-    def add_client(self) -> str:
-        """Create a client namespace joined to the bridge; return its name."""
+    def add_client(self, loss_percent: float = 0.0) -> str:
+        """Create a client namespace joined to the bridge; return its name. ``loss_percent``: the
+        share of the server's packets to it that the bridge port drops (``tc netem loss``)."""
         index = self._clients
         self._clients += 1
         name = f'{self.tag}c{index}'
@@ -105,6 +106,10 @@ class Topology:
         # need N x N ARP entries, and Linux's ARP table (1024 entries by default, shared by all
         # namespaces) overflowed at 32 clients, silently cutting the last ones off.
         _ip('-n', self.server, 'link', 'set', 'dev', port, 'type', 'bridge_slave', 'isolated', 'on')
+        if loss_percent > 0:
+            subprocess.run(['tc', '-n', self.server, 'qdisc', 'add', 'dev', port, 'root', 'netem',
+                            'loss', f'{loss_percent:g}%'], check=True, capture_output=True,
+                           text=True, timeout=20)
         self.clients.append(name)
         return name
 
