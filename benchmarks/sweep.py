@@ -76,8 +76,8 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                              'someone who only swapped a client import')
     add_server_feedback_depth(parser)
     parser.add_argument('--loss', type=float, default=0.0,
-                        help='percent of the server\'s packets to each client dropped on the way '
-                             '(tc netem on its bridge port; needs network namespaces)')
+                        help='percent of the server\'s packets that each client drops as they '
+                             'arrive (iptables in its network namespace)')
     parser.add_argument('--drain-timeout', type=float, default=300.0,
                         help='seconds a phase may take after its goals finished')
     parser.add_argument('--goals-timeout', type=float, default=None,

@@ -101,8 +101,8 @@ class LoadSpec:
         many seconds.
     :ivar server_feedback_depth: the server's feedback writer alone keeps this many samples
         (rclpy's default is 10); None: as every queue (:func:`queue_depth`).
-    :ivar loss_percent: with namespaces, the share of the server's packets to each client that
-        are dropped on the way (``tc netem``); 0: none.
+    :ivar loss_percent: with namespaces, the share of the server's packets that each client
+        drops as they arrive (:meth:`harness.netns.Topology.add_client`); 0: none.
     """
 
     clients: int = 8
