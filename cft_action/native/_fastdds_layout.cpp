@@ -48,7 +48,6 @@ using eprosima::fastrtps::rtps::SerializedPayload_t;
 using eprosima::fastrtps::rtps::StatefulReader;
 using eprosima::fastrtps::rtps::StatefulWriter;
 using eprosima::fastrtps::rtps::WriteParams;
-using eprosima::fastrtps::rtps::WriterTimes;
 
 #define LAYOUT(name, value, what) asm volatile("\n->" #name " %c0 " what : : "i"((long)(value)))
 
@@ -102,8 +101,8 @@ void cft_fastdds_layout() {
   LAYOUT(SNS_BASE, offsetof(SequenceNumberSet_t, base_), "SequenceNumberSet_t's base (BitmapRange)");
   LAYOUT(SW_SIZE, sizeof(StatefulWriter), "sizeof(StatefulWriter)");
   LAYOUT(SW_TIMES, offsetof(StatefulWriter, m_times), "StatefulWriter::m_times (WriterTimes)");
-  LAYOUT(WT_SIZE, sizeof(WriterTimes), "sizeof(WriterTimes)");
-  LAYOUT(WT_HEARTBEAT_PERIOD, offsetof(WriterTimes, heartbeatPeriod),
+  LAYOUT(WT_SIZE, sizeof(eprosima::fastrtps::rtps::WriterTimes), "sizeof(WriterTimes)");
+  LAYOUT(WT_HEARTBEAT_PERIOD, offsetof(eprosima::fastrtps::rtps::WriterTimes, heartbeatPeriod),
          "WriterTimes::heartbeatPeriod (Duration_t)");
   LAYOUT(SW_GUID, offsetof(StatefulWriter, m_guid), "StatefulWriter's Endpoint::m_guid (GUID_t)");
   LAYOUT(SW_SEPARATE_SENDING, offsetof(StatefulWriter, m_separateSendingEnabled),

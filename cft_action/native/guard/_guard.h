@@ -28,6 +28,11 @@ int cft_guard_knows_fastdds2(void);
 // not yet).
 bool cft_guard_part_on(int *cache, const char *env, bool usable);
 
+// The environment variable `env` as a period of `min_ms` to `max_ms` ms, in ns: `fallback_ms`'s
+// when unset or empty, 0 when "off"; anything else is said once and gives the fallback. Decided
+// once, cached in *cache (-1: not yet).
+long cft_guard_env_ms(long *cache, const char *env, long fallback_ms, long min_ms, long max_ms);
+
 // The definition of `name` in the loaded library `soname` (rmw loads Fast DDS and its own
 // libraries RTLD_LOCAL, outside the global scope), else the next one after the guard's; NULL if
 // there is none. Cached in *cache (release) on the first call; the library's handle is kept, since

@@ -217,22 +217,10 @@ static long heartbeat_all_ns(void) {
 // Fast DDS. 0 when off, else nanoseconds.
 #define PIGGYBACK_MS 10
 static long piggyback_ns(void) {
-  static long interval = -2;  // -2: not read yet
-  long v = __atomic_load_n(&interval, __ATOMIC_RELAXED);
-  if (v != -2) return v;
-  const char *text = getenv("CFT_GUARD_PIGGYBACK_MS");
-  if (text == NULL || text[0] == '\0') {
-    v = PIGGYBACK_MS * 1000000L;
-  } else if (strcmp(text, "off") == 0) {
-    v = 0;
-  } else if ((v = ms_to_ns(text)) < 0) {
-    cft_say("CFT_GUARD_PIGGYBACK_MS=%.40s is not off or a number of ms from 0 to 60000; using %d",
-            text, PIGGYBACK_MS);
-    v = PIGGYBACK_MS * 1000000L;
-  }
-  if (!cft_guard_knows_fastdds2()) v = 0;
-  __atomic_store_n(&interval, v, __ATOMIC_RELAXED);
-  return v;
+  static long interval = -1;  // -1: not read yet
+  return cft_guard_knows_fastdds2()
+             ? cft_guard_env_ms(&interval, "CFT_GUARD_PIGGYBACK_MS", PIGGYBACK_MS, 0, 60000)
+             : 0;
 }
 
 static bool gaps_deferred(void) {

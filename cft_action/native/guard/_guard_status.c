@@ -613,22 +613,7 @@ bool cft_status_verdict(void **program, const void *payload, const void *reader_
 // CFT_GUARD_STATUS_HEARTBEAT_MS in ns: 0 for `off`, else 1 to 3000 ms (default STATUS_HEARTBEAT_MS).
 static long status_heartbeat_ns(void) {
   static long period = -1;  // -1: not read yet
-  long v = __atomic_load_n(&period, __ATOMIC_RELAXED);
-  if (v >= 0) return v;
-  const char *text = getenv("CFT_GUARD_STATUS_HEARTBEAT_MS");
-  char *end = NULL;
-  long ms = text != NULL && text[0] != '\0' ? strtol(text, &end, 10) : STATUS_HEARTBEAT_MS;
-  if (text != NULL && strcmp(text, "off") == 0) {
-    v = 0;
-  } else if (end != NULL && (*end != '\0' || ms < 1 || ms > 3000)) {
-    cft_say("CFT_GUARD_STATUS_HEARTBEAT_MS=%.40s is not off or a number of ms from 1 to 3000; "
-            "using %d", text, STATUS_HEARTBEAT_MS);
-    v = STATUS_HEARTBEAT_MS * 1000000L;
-  } else {
-    v = ms * 1000000L;
-  }
-  __atomic_store_n(&period, v, __ATOMIC_RELAXED);
-  return v;
+  return cft_guard_env_ms(&period, "CFT_GUARD_STATUS_HEARTBEAT_MS", STATUS_HEARTBEAT_MS, 1, 3000);
 }
 
 #define SEEN_WRITERS 64
