@@ -109,6 +109,8 @@ class Topology:
         # namespaces) overflowed at 32 clients, silently cutting the last ones off.
         _ip('-n', self.server, 'link', 'set', 'dev', port, 'type', 'bridge_slave', 'isolated', 'on')
         if loss_percent > 0:
+            if shutil.which('iptables') is None:
+                raise RuntimeError('a loss needs iptables (apt-get install iptables)')
             subprocess.run(self.command(name, [
                 'iptables', '-A', 'INPUT', '-s', SERVER_ADDRESS, '-m', 'statistic', '--mode',
                 'random', '--probability', f'{loss_percent / 100:.4f}', '-j', 'DROP']),
