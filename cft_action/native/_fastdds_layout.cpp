@@ -101,6 +101,8 @@ void cft_fastdds_layout() {
   LAYOUT(SNS_BASE, offsetof(SequenceNumberSet_t, base_), "SequenceNumberSet_t's base (BitmapRange)");
   LAYOUT(SW_SIZE, sizeof(StatefulWriter), "sizeof(StatefulWriter)");
   LAYOUT(SW_TIMES, offsetof(StatefulWriter, m_times), "StatefulWriter::m_times (WriterTimes)");
+  LAYOUT(SW_PERIODIC_HEARTBEAT, offsetof(StatefulWriter, periodic_hb_event_),
+         "StatefulWriter::periodic_hb_event_ (TimedEvent*)");
   LAYOUT(WT_SIZE, sizeof(eprosima::fastrtps::rtps::WriterTimes), "sizeof(WriterTimes)");
   LAYOUT(WT_HEARTBEAT_PERIOD, offsetof(eprosima::fastrtps::rtps::WriterTimes, heartbeatPeriod),
          "WriterTimes::heartbeatPeriod (Duration_t)");

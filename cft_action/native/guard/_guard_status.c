@@ -71,8 +71,9 @@
 // write) on the writer of a status write that judged a kept reader (_guard_heartbeats.c calls
 // cft_status_writer with it), once per writer: its vtable pointer must be StatefulWriter's, its
 // m_times found as native/_endpoint_times.h says (the headers' offset, or up to 64 B past it in a
-// security build) with a period that reads as one. CFT_GUARD_STATUS_HEARTBEAT_MS sets the period
-// (1 to 3000 ms; `off` leaves Fast DDS's).
+// security build) with a period that reads as one; its periodic heartbeat event is then
+// restarted, so that a wait already running ends too. CFT_GUARD_STATUS_HEARTBEAT_MS sets the
+// period (1 to 3000 ms; `off` leaves Fast DDS's).
 //
 // The requesters' record holds REQUESTER_SLOTS / 2 goals; when it is full it is cleared, and the
 // goals taken before then count as anyone's (every kept reader is passed their changes) until the
@@ -141,7 +142,7 @@ _Static_assert(RMW_GUID_SIZE == 16, "rmw's writer_guid is not a 16-byte GUID");
 #endif
 #define SEQUENCE_SIZE 8  // SequenceNumber_t: {int32 high, uint32 low}, as on the wire
 #if STATUS_LAYOUT_KNOWN && defined(SW_SIZE) && defined(SW_TIMES) && defined(WT_SIZE) && \
-    defined(WT_HEARTBEAT_PERIOD)
+    defined(WT_HEARTBEAT_PERIOD) && defined(SW_PERIODIC_HEARTBEAT)
 #define WRITER_TIMES_KNOWN 1
 #else
 #define WRITER_TIMES_KNOWN 0
@@ -151,6 +152,9 @@ _Static_assert(RMW_GUID_SIZE == 16, "rmw's writer_guid is not a 16-byte GUID");
   "_ZN8eprosima8fastrtps4rtps14StatefulWriter11updateTimesERKNS1_11WriterTimesE"
 #define WRITER_VTABLE "_ZTVN8eprosima8fastrtps4rtps14StatefulWriterE"
 #define WRITER_TIMES_VTABLE "_ZTVN8eprosima8fastrtps4rtps11WriterTimesE"
+#define TIMED_EVENT_VTABLE "_ZTVN8eprosima8fastrtps4rtps10TimedEventE"
+#define CANCEL_TIMER "_ZN8eprosima8fastrtps4rtps10TimedEvent12cancel_timerEv"
+#define RESTART_TIMER "_ZN8eprosima8fastrtps4rtps10TimedEvent13restart_timerEv"
 #define STATUS_HEARTBEAT_MS 100
 
 enum {
@@ -631,7 +635,28 @@ static bool first_sight(const void *writer) {
 }
 
 typedef void (*writer_update_times_fn)(void *writer, const void *times);
-static void *real_writer_update_times, *writer_vtable;
+typedef void (*timer_fn)(void *event);
+static void *real_writer_update_times, *writer_vtable, *event_vtable, *real_cancel, *real_restart;
+
+// A running timer keeps the period it was started with (TimedEvent::update_interval only sets the
+// next one's): the writer's periodic heartbeat event, which precedes m_times by the headers'
+// distance (a security build moves both), is cancelled and restarted, as Fast DDS does with the
+// writer's mutex held, if it is a TimedEvent.
+static void restart_periodic_heartbeat(uintptr_t times_member) {
+  const uint8_t *vtable = cft_guard_real(&event_vtable, FASTDDS2_SONAME, TIMED_EVENT_VTABLE);
+  timer_fn cancel = (timer_fn)cft_guard_real(&real_cancel, FASTDDS2_SONAME, CANCEL_TIMER);
+  timer_fn restart = (timer_fn)cft_guard_real(&real_restart, FASTDDS2_SONAME, RESTART_TIMER);
+  void *event;
+  memcpy(&event, (const void *)(times_member - SW_TIMES + SW_PERIODIC_HEARTBEAT), sizeof event);
+  if (vtable == NULL || cancel == NULL || restart == NULL || event == NULL ||
+      *(const uintptr_t *)event != (uintptr_t)(vtable + CFT_VTABLE_START)) {
+    cft_say("a status writer's periodic heartbeat is not where the guard looks: its running "
+            "period ends as Fast DDS scheduled it");
+    return;
+  }
+  cancel(event);
+  restart(event);
+}
 
 void cft_status_writer(void *writer) {
 #if WRITER_TIMES_KNOWN
@@ -663,6 +688,7 @@ void cft_status_writer(void *writer) {
                                 (uint32_t)(period % 1000000000L)};
   memcpy(times + WT_HEARTBEAT_PERIOD, &wanted, sizeof wanted);
   update(writer, times);
+  restart_periodic_heartbeat(member);
   count(HEARTBEATS);
 #else
   (void)writer;
