@@ -471,10 +471,12 @@ static void defer(void) {
   } else if (memcmp(frame->sequence, asked_change + CC_SEQUENCE, SEQUENCE_SIZE) != 0) {
     return;  // another change in the same write: not expected; it is sent
   }
-  if (frame->deferred_count < CFT_STATUS_FRAME_READERS) frame->deferred[frame->deferred_count++] = asking;
+  if (frame->deferred_count < CFT_STATUS_FRAME_READERS)
+    frame->deferred[frame->deferred_count++] = asking;
 #endif
 }
 
+#if DEFER_LAYOUT_KNOWN
 static bool deferred(const void *reader, const void *sequence) {
   if (frame == NULL || frame->deferred_count == 0 ||
       memcmp(frame->sequence, sequence, SEQUENCE_SIZE) != 0)
@@ -483,6 +485,7 @@ static bool deferred(const void *reader, const void *sequence) {
     if (frame->deferred[i] == reader) return true;
   return false;
 }
+#endif
 
 typedef bool (*unsent_fn)(void *self, const void *sequence, uint32_t *next_fragment, void *gap,
                           const void *min_sequence, bool *reactivate_heartbeat);
@@ -614,6 +617,7 @@ bool cft_status_verdict(void **program, const void *payload, const void *reader_
 }
 
 // ---- the status writer's heartbeat period ---------------------------------------------------------
+#if WRITER_TIMES_KNOWN
 // CFT_GUARD_STATUS_HEARTBEAT_MS in ns: 0 for `off`, else 1 to 3000 ms (default STATUS_HEARTBEAT_MS).
 static long status_heartbeat_ns(void) {
   static long period = -1;  // -1: not read yet
@@ -657,6 +661,8 @@ static void restart_periodic_heartbeat(uintptr_t times_member) {
   cancel(event);
   restart(event);
 }
+
+#endif
 
 void cft_status_writer(void *writer) {
 #if WRITER_TIMES_KNOWN
