@@ -350,19 +350,21 @@ bool cft_guard_part_on(int *cache, const char *env, bool usable) {
   return v;
 }
 
+long cft_guard_ms_to_ns(const char *text, long min_ms, long max_ms) {
+  char *end;
+  long ms = strtol(text, &end, 10);
+  return end == text || *end != '\0' || ms < min_ms || ms > max_ms ? -1 : ms * 1000000L;
+}
+
 long cft_guard_env_ms(long *cache, const char *env, long fallback_ms, long min_ms, long max_ms) {
   long v = __atomic_load_n(cache, __ATOMIC_RELAXED);
   if (v >= 0) return v;
   const char *text = getenv(env);
-  char *end;
-  long ms = text != NULL ? strtol(text, &end, 10) : 0;
   if (text == NULL || text[0] == '\0') {
     v = fallback_ms * 1000000L;
   } else if (strcmp(text, "off") == 0) {
     v = 0;
-  } else if (end != text && *end == '\0' && ms >= min_ms && ms <= max_ms) {
-    v = ms * 1000000L;
-  } else {
+  } else if ((v = cft_guard_ms_to_ns(text, min_ms, max_ms)) < 0) {
     cft_say("%s=%.40s is not off or a number of ms from %ld to %ld; using %ld", env, text, min_ms,
             max_ms, fallback_ms);
     v = fallback_ms * 1000000L;

@@ -28,6 +28,9 @@ int cft_guard_knows_fastdds2(void);
 // not yet).
 bool cft_guard_part_on(int *cache, const char *env, bool usable);
 
+// `text` as a number of ms from `min_ms` to `max_ms`, in ns; -1 if it is not one.
+long cft_guard_ms_to_ns(const char *text, long min_ms, long max_ms);
+
 // The environment variable `env` as a period of `min_ms` to `max_ms` ms, in ns: `fallback_ms`'s
 // when unset or empty, 0 when "off"; anything else is said once and gives the fallback. Decided
 // once, cached in *cache (-1: not yet).

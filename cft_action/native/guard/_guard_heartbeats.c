@@ -186,13 +186,6 @@ void cft_send_heartbeat_piggyback_nts2(void *self, void *group, void *locator_se
 // never, else nanoseconds.
 #define NEVER LONG_MAX
 #define STATUS_HEARTBEAT_ALL_MS 10
-// `text` as a number of ms from 0 to 60000, in ns; -1 if it is not one.
-static long ms_to_ns(const char *text) {
-  char *end;
-  long ms = strtol(text, &end, 10);
-  return end == text || *end != '\0' || ms < 0 || ms > 60000 ? -1 : ms * 1000000L;
-}
-
 static long heartbeat_all_ns(void) {
   static long interval = -2;  // -2: not read yet
   long v = __atomic_load_n(&interval, __ATOMIC_RELAXED);
@@ -202,7 +195,7 @@ static long heartbeat_all_ns(void) {
     v = NEVER;
   } else if (strcmp(text, "off") == 0) {
     v = -1;
-  } else if ((v = ms_to_ns(text)) < 0) {
+  } else if ((v = cft_guard_ms_to_ns(text, 0, 60000)) < 0) {
     cft_say("CFT_GUARD_HEARTBEAT_ALL_MS=%.40s is not never, off or a number of ms from 0 to "
             "60000; using never", text);
     v = NEVER;
@@ -273,8 +266,10 @@ CFT_EXPORT void cft_select_all_readers_nts2(void *self, void *group, void *locat
     __asm__(SELECT_ALL);
 void cft_select_all_readers_nts2(void *self, void *group, void *locator_selector) {
   long interval = heartbeat_all_ns();
-  if (cft_status_write_now()) cft_status_writer(self);
-  if (interval == NEVER && cft_status_write_now()) interval = STATUS_HEARTBEAT_ALL_MS * 1000000L;
+  if (cft_status_write_now()) {
+    cft_status_writer(self);
+    if (interval == NEVER) interval = STATUS_HEARTBEAT_ALL_MS * 1000000L;
+  }
   if (interval >= 0 && in_piggyback) {
     if (interval == NEVER || !due(widened_slots, (uintptr_t)self, interval)) {
       count(NARROWED);
@@ -362,7 +357,6 @@ void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final
 // SecurityManager::cancel_init(), exported only by a Fast DDS built with SECURITY=ON, which
 // moves RTPSWriter's members (m_separateSendingEnabled) from the headers' offsets.
 #define SECURITY_ONLY_SYMBOL "_ZN8eprosima8fastrtps4rtps8security15SecurityManager11cancel_initEv"
-#define SEQUENCE_SIZE 8  // SequenceNumber_t and GUID_t: as on the wire
 #define GUID_SIZE 16
 
 // CFT_GUARD_MERGE_GAPS: on unless "off" or "0", and only where the guard knows the Fast DDS.
@@ -401,7 +395,7 @@ struct held {
   void *writer;                   // the StatefulWriter whose HEARTBEAT followed; NULL: none yet
   uint8_t writer_guid[GUID_SIZE]; // its GUID, to tell its DATA
   bool final, liveliness;         // that send_heartbeat_nts_'s arguments
-  uint8_t seq[SEQUENCE_SIZE];     // add_gap's arguments: the first sequence number of the run,
+  uint8_t seq[CFT_SEQUENCE_SIZE]; // add_gap's arguments: the first sequence number of the run,
   uint8_t set[SNS_SIZE];          // the set, whose base is the change of the DATA that follows,
   uint8_t reader[GUID_SIZE];      // and the reader
 };
@@ -437,7 +431,7 @@ bool cft_add_gap2(void *group, const void *seq, const void *set, const void *rea
       !cft_status_write_now()) {
     if (held_count > 0 && (held[0].group != group ||
                            memcmp(held[0].set + SNS_BASE, (const uint8_t *)set + SNS_BASE,
-                                  SEQUENCE_SIZE) != 0))
+                                  CFT_SEQUENCE_SIZE) != 0))
       drop_held();
     if (held_count < HELD) {
       struct held *h = &held[held_count++];
@@ -491,7 +485,7 @@ static void merge_held(void *group, const uint8_t *change) {
     const struct held *h = &merged[i];
     if (h->group != group || h->writer == NULL ||
         memcmp(h->writer_guid, change + CC_WRITER_GUID, GUID_SIZE) != 0 ||
-        memcmp(h->set + SNS_BASE, change + CC_SEQUENCE, SEQUENCE_SIZE) != 0) {
+        memcmp(h->set + SNS_BASE, change + CC_SEQUENCE, CFT_SEQUENCE_SIZE) != 0) {
       count(MERGES_DROPPED);
       continue;
     }

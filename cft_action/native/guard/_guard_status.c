@@ -140,7 +140,6 @@ _Static_assert(RMW_GUID_SIZE == 16, "rmw's writer_guid is not a 16-byte GUID");
 #else
 #define DEFER_LAYOUT_KNOWN 0
 #endif
-#define SEQUENCE_SIZE 8  // SequenceNumber_t: {int32 high, uint32 low}, as on the wire
 #if STATUS_LAYOUT_KNOWN && defined(SW_SIZE) && defined(SW_TIMES) && defined(WT_SIZE) && \
     defined(WT_HEARTBEAT_PERIOD) && defined(SW_PERIODIC_HEARTBEAT)
 #define WRITER_TIMES_KNOWN 1
@@ -467,8 +466,8 @@ static void defer(void) {
 #if DEFER_LAYOUT_KNOWN
   if (frame == NULL || asking == NULL || asked_change == NULL || !defer_on()) return;
   if (frame->deferred_count == 0) {
-    memcpy(frame->sequence, asked_change + CC_SEQUENCE, SEQUENCE_SIZE);
-  } else if (memcmp(frame->sequence, asked_change + CC_SEQUENCE, SEQUENCE_SIZE) != 0) {
+    memcpy(frame->sequence, asked_change + CC_SEQUENCE, CFT_SEQUENCE_SIZE);
+  } else if (memcmp(frame->sequence, asked_change + CC_SEQUENCE, CFT_SEQUENCE_SIZE) != 0) {
     return;  // another change in the same write: not expected; it is sent
   }
   if (frame->deferred_count < CFT_STATUS_FRAME_READERS)
@@ -479,7 +478,7 @@ static void defer(void) {
 #if DEFER_LAYOUT_KNOWN
 static bool deferred(const void *reader, const void *sequence) {
   if (frame == NULL || frame->deferred_count == 0 ||
-      memcmp(frame->sequence, sequence, SEQUENCE_SIZE) != 0)
+      memcmp(frame->sequence, sequence, CFT_SEQUENCE_SIZE) != 0)
     return false;
   for (int i = 0; i < frame->deferred_count; i++)
     if (frame->deferred[i] == reader) return true;

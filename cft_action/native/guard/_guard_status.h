@@ -36,6 +36,7 @@ void cft_status_reader_kept(void);
 // from the history had been passed to and had not acknowledged. Opened and closed by _guard.c's
 // wrapper, on the writing thread, with the writer's mutex held by Fast DDS inside it.
 #define CFT_STATUS_FRAME_READERS 64
+#define CFT_SEQUENCE_SIZE 8  // a SequenceNumber_t: {int32 high, uint32 low}, as on the wire
 struct cft_status_frame {
   struct cft_status_frame *outer;  // a write nested in this one's (statistics writers)
   int count;
@@ -47,7 +48,7 @@ struct cft_status_frame {
   // The readers passed this write's change only because they were owed it: it is not sent to
   // them now (see _guard_status.c, "Owed samples are asked for").
   int deferred_count;
-  unsigned char sequence[8];                        // the change's SequenceNumber_t
+  unsigned char sequence[CFT_SEQUENCE_SIZE];        // the change's SequenceNumber_t
   const void *deferred[CFT_STATUS_FRAME_READERS];  // ReaderProxy objects, compared, never read
 };
 void cft_status_frame_open(struct cft_status_frame *frame);
