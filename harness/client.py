@@ -210,6 +210,7 @@ class LoadClient:
         self.last_response_s: Optional[float] = None
         self.last_callback_s: Optional[float] = None
         self.terminal_s: Optional[float] = None  # when the status topic ended the last handle
+        self.seen = (0, 0)  # status samples taken and goals rejected when note_terminal looked
         self.start_cpu = 0.0
         self.start_threads: dict[str, float] = {}
         self.start_counters: dict[str, Any] = {}
@@ -278,8 +279,17 @@ class LoadClient:
         return self.rejected + sum(h.status in _TERMINAL for h in self.handles)
 
     def note_terminal(self) -> None:
-        """Record when every goal handle first had a terminal status (called after each spin)."""
-        if self.terminal_s is None and self.started and self.goals_done() == self.goals:
+        """Record when every goal handle first had a terminal status (called after each spin).
+
+        A handle's status changes only when a status sample is taken (rclpy updates it in the same
+        spin), and ``goals_done`` counts rejections too: the handles are counted only after a spin
+        that took a sample or a rejection, so that a client of thousands of goals does not walk them
+        at every feedback message."""
+        seen = (self.client.status_counts['status'], self.rejected)
+        if self.terminal_s is not None or not self.started or seen == self.seen:
+            return
+        self.seen = seen
+        if self.goals_done() == self.goals:
             self.terminal_s = time.monotonic() - self.started
 
     def progress(self) -> dict[str, Any]:
