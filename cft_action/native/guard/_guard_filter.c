@@ -163,6 +163,13 @@ CFT_EXPORT const char *cft_guard_filter_layout_report(void) {
   return copy;
 }
 
+// A reader's filter, as read from its discovery data (read_reader_filter).
+struct reader_filter {
+  const char *type, *related, *class_name, *expression;
+  const char *params[MAX_PARAMETERS];
+  int param_count;
+};
+
 #if CFT_LAYOUT_KNOWN
 // A fixed_string<255>, or NULL when its length and terminator disagree.
 static const char *string255(const uint8_t *at) {
@@ -218,12 +225,6 @@ static bool is_feedback_type(const char *type) {
 }
 
 // What a reader's discovery data says about its filter, read through the checked layout.
-struct reader_filter {
-  const char *type, *related, *class_name, *expression;
-  const char *params[MAX_PARAMETERS];
-  int param_count;
-};
-
 // Reads the reader's filter into *f. False when the data fails a check (the layout is then
 // suspect, and every verdict goes back to Fast DDS) or the reader has no filter (*filtered false).
 // True when the reader's data holds its GUID where the checked layout has it (m_guid and m_key).
@@ -302,9 +303,6 @@ static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool
 }
 #else
 // Built without Fast DDS headers: no layout to read the reader's filter with.
-struct reader_filter {
-  const char *class_name, *expression;
-};
 static bool read_reader_filter(const uint8_t *info, const uint8_t *guid, struct reader_filter *f,
                                bool *filtered) {
   (void)info, (void)guid, (void)f, (void)filtered;

@@ -185,11 +185,13 @@ static bool ends_with(const char *s, const char *tail) {
   return n >= m && strcmp(s + n - m, tail) == 0;
 }
 
+#if DEFER_LAYOUT_KNOWN
 // CFT_GUARD_DEFER_OWED: on unless "off" or "0", where the status filter is on.
 static bool defer_on(void) {
   static int on = -1;
-  return cft_guard_part_on(&on, "CFT_GUARD_DEFER_OWED", DEFER_LAYOUT_KNOWN) && status_on();
+  return cft_guard_part_on(&on, "CFT_GUARD_DEFER_OWED", 1) && status_on();
 }
+#endif
 
 bool cft_status_keeps(const char *topic, const char *type) {
   return topic != NULL && type != NULL && strncmp(topic, STATUS_TOPIC_PREFIX, 3) == 0 &&
@@ -212,7 +214,6 @@ struct requester {
   bool used;
 };
 static struct requester *requesters;  // REQUESTER_SLOTS, allocated with the first request
-static unsigned requester_count;
 static pthread_mutex_t requesters_lock = PTHREAD_MUTEX_INITIALIZER;
 
 static struct requester *requester_slot(const uint8_t *uuid) {
@@ -222,6 +223,8 @@ static struct requester *requester_slot(const uint8_t *uuid) {
       return &requesters[i];
 }
 
+#if STATUS_LAYOUT_KNOWN
+static unsigned requester_count;
 static void record_requester(const uint8_t *uuid, const uint8_t *guid) {
   pthread_mutex_lock(&requesters_lock);
   if (requesters == NULL) requesters = calloc(REQUESTER_SLOTS, sizeof *requesters);
@@ -240,6 +243,7 @@ static void record_requester(const uint8_t *uuid, const uint8_t *guid) {
   }
   pthread_mutex_unlock(&requesters_lock);
 }
+#endif
 
 // Called with requesters_lock held: the requester's prefix, or NULL when it is not known.
 static const uint8_t *requester_of(const uint8_t *uuid) {
@@ -490,7 +494,10 @@ typedef bool (*unsent_fn)(void *self, const void *sequence, uint32_t *next_fragm
                           const void *min_sequence, bool *reactivate_heartbeat);
 typedef void (*from_unsent_fn)(void *self, const void *sequence, int status, bool restart_nack,
                                bool delivered);
-static void *real_unsent, *real_unsent_const, *real_from_unsent;
+static void *real_unsent, *real_unsent_const;
+#if DEFER_LAYOUT_KNOWN
+static void *real_from_unsent;
+#endif
 
 // ReaderProxy::change_is_unsent, for each reader, as the writer delivers a change: false for a
 // reader it is deferred for, whose change becomes UNACKNOWLEDGED. Only for one the real member

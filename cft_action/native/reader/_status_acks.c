@@ -56,11 +56,11 @@
 typedef bool (*update_times_fn)(void *reader, const void *times);
 
 static struct cft_install installed = CFT_INSTALL_INIT;
-static bool armed;                   // set once installed
 static __thread int adjusted_here;   // on this thread, since cft_status_acks_taken
 static __thread char refused[160];   // why the last status reader on this thread was left alone
 
 #if CFT_LAYOUT_KNOWN
+static bool armed;                   // set once installed
 static update_times_fn update_times;
 static uintptr_t reader_vptr;
 

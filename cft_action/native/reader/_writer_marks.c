@@ -67,12 +67,15 @@ typedef struct gid (*create_gid_fn)(const char *identifier, const uint8_t *guid)
 
 static parse_fn real_parse;
 static add_entity_fn real_add_entity;
-static create_gid_fn real_create_gid;
 static __thread bool parsed_mark;  // the last USER_DATA parsed on this thread held the mark
-// Between parse and add_entity on this thread: the GUID references create_rmw_gid was given.
+// Between parse and add_entity on this thread: the GUID references create_rmw_gid was given, where
+// the readers' filters are read (Fast DDS 2's layout, install_reader_filters).
+#define READER_FILTERS_KNOWN (CFT_LAYOUT_KNOWN && CFT_LAYOUT_VERSION_MAJOR == 2)
 #define GUID_REFS 4
 static __thread bool discovering;
+#if READER_FILTERS_KNOWN
 static __thread const uint8_t *guid_refs[GUID_REFS];
+#endif
 static __thread unsigned guid_ref_count;
 
 // The marked writers seen, a ring: a writer's GID is never reused, and one that is gone only
@@ -100,10 +103,13 @@ static int32_t parse(const uint8_t *user_data, size_t size, void *type_hash) {
   return real_parse(user_data, size, type_hash);
 }
 
+#if READER_FILTERS_KNOWN
+static create_gid_fn real_create_gid;
 static struct gid create_gid(const char *identifier, const uint8_t *guid) {
   if (discovering && guid_ref_count < GUID_REFS) guid_refs[guid_ref_count++] = guid;
   return real_create_gid(identifier, guid);
 }
+#endif
 
 #if CFT_LAYOUT_KNOWN
 // The class name of the filter in the discovery data whose m_guid is at `guid` ("" for none) in
@@ -129,8 +135,10 @@ static bool filter_class_at(const uint8_t *guid, char *out) {
 // first failure (reader_error) ends the reading for the process.
 static void note_reader(const struct gid *gid) {
   const uint8_t *guid = NULL;
+#if READER_FILTERS_KNOWN
   for (unsigned i = 0; i < guid_ref_count && guid == NULL; i++)
     if (memcmp(guid_refs[i], gid->data, GID_SIZE) == 0) guid = guid_refs[i];
+#endif
   pthread_mutex_lock(&marked_lock);
   struct reader_filter_class *slot = &readers[reader_count % MARKED_SLOTS];
   if (reader_error[0] != '\0') {
@@ -168,7 +176,7 @@ static struct cft_install installed = CFT_INSTALL_INIT;
 // mangled name names eprosima::fastrtps::rtps::GUID_t) and this library has the layout of the
 // Fast DDS 2 headers; else reader_error says why they are not read.
 static void install_reader_filters(void *library) {
-#if CFT_LAYOUT_KNOWN && CFT_LAYOUT_VERSION_MAJOR == 2
+#if READER_FILTERS_KNOWN
   real_create_gid = (create_gid_fn)dlsym(library, CREATE_GID);
   if (real_create_gid == NULL)
     snprintf(reader_error, sizeof reader_error, "not found: %s", CREATE_GID);
