@@ -61,7 +61,8 @@
 // R_X86_64_64 relocations against its exported name, no thunk), answers for the readers of those
 // classes that _guard_filter.c keeps out of Fast DDS's filter collection, so that no filter
 // signature is written for them, and for the readers that an action's reply is not for
-// (_guard_replies.c). Only Fast DDS 2.14 has the last three here.
+// (_guard_replies.c). Only Fast DDS 2.14 has the last three here, but for the fifth, whose mangled
+// name is the same in 3.x: there it only calls the real member (cft_find).
 enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND = 4, FN_REL = 5,
        FN_COUNT = 6 };
 
@@ -70,7 +71,8 @@ enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND
 #define PCNC2 "_ZN8eprosima7fastdds3dds14DataWriterImpl25perform_create_new_changeENS_8fastrtps4rtps12ChangeKind_tEPvRNS4_11WriteParamsERKNS4_16InstanceHandle_tE"
 #define PRFI2 "_ZN8eprosima7fastdds3dds14DataWriterImpl26process_reader_filter_infoERKNS_8fastrtps4rtps6GUID_tERKNS4_15ReaderProxyDataE"
 #define RRF2 "_ZN8eprosima7fastdds3dds14DataWriterImpl20remove_reader_filterERKNS_8fastrtps4rtps6GUID_tE"
-#define FIND2 "_ZN8eprosima7fastdds3dds21DomainParticipantImpl27find_content_filter_factoryEPKc"
+// The same name in Fast DDS 2 and 3: one definition serves both (cft_find).
+#define FIND "_ZN8eprosima7fastdds3dds21DomainParticipantImpl27find_content_filter_factoryEPKc"
 #define EVAL2 "_ZNK8eprosima7fastdds3dds12DDSSQLFilter19DDSFilterExpression8evaluateERKNS_8fastrtps4rtps19SerializedPayload_tERKNS1_14IContentFilter16FilterSampleInfoERKNS5_6GUID_tE"
 #define REL2 "_ZNK8eprosima7fastdds3dds14DataWriterImpl11is_relevantERKNS_8fastrtps4rtps13CacheChange_tERKNS4_6GUID_tE"
 
@@ -101,9 +103,9 @@ struct family {
 };
 
 static struct family families[] = {
-  {"Fast DDS 2", "libfastrtps.so.2.14", "libfastrtps.so", {PCNC2, PRFI2, RRF2, EVAL2, FIND2, REL2},
+  {"Fast DDS 2", "libfastrtps.so.2.14", "libfastrtps.so", {PCNC2, PRFI2, RRF2, EVAL2, FIND, REL2},
    {0}, 0, PTHREAD_MUTEX_INITIALIZER, ""},
-  {"Fast DDS 3", "libfastdds.so.3.2", "libfastdds.so", {PCNC3, PRFI3, RRF3, NULL, NULL, NULL}, {0},
+  {"Fast DDS 3", "libfastdds.so.3.2", "libfastdds.so", {PCNC3, PRFI3, RRF3, NULL, FIND, NULL}, {0},
    0, PTHREAD_MUTEX_INITIALIZER, ""},
 };
 #define N_FAMILIES ((int)(sizeof(families) / sizeof(families[0])))
@@ -336,8 +338,25 @@ void *cft_guard_real(void **cache, const char *soname, const char *name) {
   return p;
 }
 
+// Asked from the guard's other parts, also in a process of another family: family 0 is decided
+// only once its library is loaded (a probe, as cft_guard_state's), never declared missing.
 int cft_guard_knows_fastdds2(void) {
-  return __atomic_load_n(&ready(0)->state, __ATOMIC_ACQUIRE) == CFT_GUARD_ACTIVE;
+  if (__atomic_load_n(&families[0].state, __ATOMIC_ACQUIRE) == CFT_GUARD_ARMED) resolve(0, 0);
+  return __atomic_load_n(&families[0].state, __ATOMIC_ACQUIRE) == CFT_GUARD_ACTIVE;
+}
+
+// The family of the Fast DDS loaded in this process (the first found), for a member whose name
+// both families share; 0 when none is found.
+static int loaded_family(void) {
+  static int cached = -1;
+  int fam = __atomic_load_n(&cached, __ATOMIC_ACQUIRE);
+  if (fam >= 0) return fam;
+  struct loaded_list list;
+  loaded_fastdds(&list);
+  fam = list.count > 0 ? family_of_path(list.paths[0]) : -1;
+  if (fam < 0) return 0;
+  __atomic_store_n(&cached, fam, __ATOMIC_RELEASE);
+  return fam;
 }
 
 bool cft_guard_part_on(int *cache, const char *env, bool usable) {
@@ -537,15 +556,18 @@ static const struct cft_filter_class_owner guard_owner = {guard_may_create, guar
 // The writers of a guarded server filter for readers of the library's classes: every filter change
 // is locked here. Unguarded (an unknown Fast DDS), the classes stay unknown to the server, which
 // then sends such readers everything, as to plain ones.
-CFT_EXPORT void *cft_find2(void *self, const char *class_name) __asm__(FIND2);
-void *cft_find2(void *self, const char *class_name) {
-  struct family *f = ready(0);
+CFT_EXPORT void *cft_find(void *self, const char *class_name) __asm__(FIND);
+void *cft_find(void *self, const char *class_name) {
+  int fam = loaded_family();
+  struct family *f = ready(fam);
   // A writer asking for the class of a reader that _guard_filter.c keeps (one of the library's
   // classes, or the status class of _guard_status.c, which no factory here answers): no factory,
   // so that Fast DDS keeps no filter, and no signature, for it.
-  if (f->state == CFT_GUARD_ACTIVE && cft_filter_claimed(class_name)) return NULL;
-  void *ours = cft_filter_factory_for(class_name, &guard_owner);
-  if (ours != NULL && f->state == CFT_GUARD_ACTIVE) {
+  // Fast DDS 3: only the real member (the library's classes are Fast DDS 2.14's).
+  bool active = fam == 0 && f->state == CFT_GUARD_ACTIVE;
+  if (active && cft_filter_claimed(class_name)) return NULL;
+  void *ours = active ? cft_filter_factory_for(class_name, &guard_owner) : NULL;
+  if (ours != NULL) {
     __atomic_fetch_add(&filter_class_lookups, 1, __ATOMIC_RELAXED);
     return ours;
   }
@@ -571,8 +593,8 @@ CFT_EXPORT unsigned long cft_guard_filter_class_count(int which) {
 static void *our_definition(int fam, int fn) {
   static void *const ours[][FN_COUNT] = {
     {(void *)cft_pcnc2, (void *)cft_prfi2, (void *)cft_rrf2, (void *)cft_evaluate2,
-     (void *)cft_find2, (void *)cft_is_relevant2},
-    {(void *)cft_pcnc3, (void *)cft_prfi3, (void *)cft_rrf3, NULL, NULL, NULL},
+     (void *)cft_find, (void *)cft_is_relevant2},
+    {(void *)cft_pcnc3, (void *)cft_prfi3, (void *)cft_rrf3, NULL, (void *)cft_find, NULL},
   };
   return ours[fam][fn];
 }

@@ -2,7 +2,7 @@
 //
 // The reader-side twin of the server guard, for the process that changes its filters.
 //
-// A Fast DDS 2.14 DataReader evaluates its filter itself, in a receive thread, for every sample
+// A Fast DDS DataReader (2.14, and 3.2 alike) evaluates its filter itself, in a receive thread, for every sample
 // whose writer did not filter for the reader's current filter: right after each filter change,
 // until the writer has the change. ContentFilteredTopicImpl::set_expression_parameters meanwhile
 // has DDSFilterFactory::create_content_filter build a new expression and clear the old one, with
@@ -17,8 +17,12 @@
 // create_content_filter, where the reader's expression is swapped, takes the write lock. The
 // slots are found by their current value, the exported address of the member, so no object layout
 // is assumed. Readers that hold their RTPSReader's mutex wait only for the swap itself, which
-// takes no reader mutex, so the lock order cannot cycle.
+// takes no reader mutex, so the lock order cannot cycle. Fast DDS 3.2 (Kilted's wheels) has the
+// same members and vtables under its own soname and mangling (GUID_t and CacheChange_t moved to
+// eprosima::fastdds::rtps; create_content_filter's name did not change): one row of `families`
+// each, the first whose library is loaded is patched.
 #define _GNU_SOURCE
+#include <dlfcn.h>
 #include <pthread.h>
 #include <stdbool.h>
 #include <stdint.h>
@@ -29,11 +33,11 @@
 
 #define EXPORT __attribute__((visibility("default")))
 
-#define FASTRTPS_SONAME "libfastrtps.so.2.14"
 #define CFT_VTABLE "_ZTVN8eprosima7fastdds3dds24ContentFilteredTopicImplE"
-#define IS_RELEVANT_ARGS "11is_relevantERKNS_8fastrtps4rtps13CacheChange_tERKNS4_6GUID_tE"
-#define IS_RELEVANT "_ZNK8eprosima7fastdds3dds24ContentFilteredTopicImpl" IS_RELEVANT_ARGS
-#define IS_RELEVANT_THUNK "_ZThn16_NK8eprosima7fastdds3dds24ContentFilteredTopicImpl" IS_RELEVANT_ARGS
+#define IS_RELEVANT_OF(args) "_ZNK8eprosima7fastdds3dds24ContentFilteredTopicImpl" args
+#define IS_RELEVANT_THUNK_OF(args) "_ZThn16_NK8eprosima7fastdds3dds24ContentFilteredTopicImpl" args
+#define IS_RELEVANT_ARGS2 "11is_relevantERKNS_8fastrtps4rtps13CacheChange_tERKNS4_6GUID_tE"
+#define IS_RELEVANT_ARGS3 "11is_relevantERKNS0_4rtps13CacheChange_tERKNS3_6GUID_tE"
 #define FACTORY_VTABLE "_ZTVN8eprosima7fastdds3dds12DDSSQLFilter16DDSFilterFactoryE"
 #define CREATE_FILTER                                                                          \
   "_ZN8eprosima7fastdds3dds12DDSSQLFilter16DDSFilterFactory21create_content_filterEPKcS5_PKN" \
@@ -87,11 +91,33 @@ static uint32_t locked_create(void *self, const char *filter_class, const char *
   return ret;
 }
 
+// The Fast DDS builds whose members were checked: soname, is_relevant, its thunk, the factory's
+// create_content_filter.
+static const struct family {
+  const char *soname;
+  const char *names[3];
+} families[] = {
+  {"libfastrtps.so.2.14",
+   {IS_RELEVANT_OF(IS_RELEVANT_ARGS2), IS_RELEVANT_THUNK_OF(IS_RELEVANT_ARGS2), CREATE_FILTER}},
+  {"libfastdds.so.3.2",
+   {IS_RELEVANT_OF(IS_RELEVANT_ARGS3), IS_RELEVANT_THUNK_OF(IS_RELEVANT_ARGS3), CREATE_FILTER}},
+};
+
 static int install(struct cft_install *once) {
-  static const char *const names[] = {IS_RELEVANT, IS_RELEVANT_THUNK, CREATE_FILTER};
+  const struct family *family = NULL;
+  for (size_t i = 0; i < sizeof families / sizeof families[0] && family == NULL; i++) {
+    void *loaded = dlopen(families[i].soname, RTLD_NOW | RTLD_NOLOAD);
+    if (loaded != NULL) {
+      dlclose(loaded);
+      family = &families[i];
+    }
+  }
+  if (family == NULL)
+    return cft_install_fail(once, -1, "no Fast DDS whose members it knows is loaded",
+                            "libfastrtps.so.2.14, libfastdds.so.3.2");
   void *resolved[3];
   int status;
-  void *library = cft_resolve(once, FASTRTPS_SONAME, names, 3, resolved, &status);
+  void *library = cft_resolve(once, family->soname, family->names, 3, resolved, &status);
   if (library == NULL) return status;
   real_is_relevant = (is_relevant_fn)resolved[0];
   real_is_relevant_thunk = (is_relevant_fn)resolved[1];
