@@ -274,16 +274,17 @@ CHURN_INTERVAL = 0.02
 FEEDBACK_PERIOD = 0.0005
 
 
-def churn_scenario(guarded: bool) -> dict:
+def churn_scenario(guarded: bool, updates: int = CHURN_UPDATES) -> dict:
     """Fast-DDS issue 4878's churn: the ``update`` cell of :mod:`harness.hazard`.
 
     A server (guarded or not) publishing feedback every 0.5 ms to a goal that an ordinary client
-    keeps running, and a client that changes its feedback filter every 20 ms, 200 times. Returns
+    keeps running, and a client that changes its feedback filter every 20 ms, ``updates`` times
+    (its class as ``CFT_ACTION_WRITER_FILTERING`` says: the library's, or DDS-SQL). Returns
     what happened; the tests assert on it. The same cell with DDS-SQL on an unguarded server is
     a measurement, not a test: ``CFT_ACTION_WRITER_FILTERING=any python -m benchmarks.hazard
     --events update --guard off`` (docs/SAFETY.md).
     """
-    cell = hazard.Cell('update', FEEDBACK_PERIOD, 'small', guarded, CHURN_UPDATES)
+    cell = hazard.Cell('update', FEEDBACK_PERIOD, 'small', guarded, updates)
     opts = argparse.Namespace(interval=CHURN_INTERVAL, settle=0.5, k=1, keep_cores=False)
     return hazard.run_cell(cell, opts, domain=int(os.environ['ROS_DOMAIN_ID']))
 

@@ -17,6 +17,7 @@
 #include <string.h>
 
 #include "_patch.h"
+#include "_fastdds_layout.h"
 #include "_filter_class.h"
 #include "_status_trim.h"
 
@@ -56,6 +57,9 @@ static void *create_cft(void *self, const void *name, void *related_topic, const
 }
 
 static int install(struct cft_install *once) {
+  // The classes judge samples by the layout of the Fast DDS 2.14 headers (Fast DDS 3: none).
+  if (!CFT_LAYOUT_KNOWN)
+    return cft_install_fail(once, -5, "this build has no Fast DDS 2.14 layout", CFT_LAYOUT_SOURCE);
   static const char *const names[] = {FIND, CREATE_CFT};
   void *resolved[2];
   int status;
