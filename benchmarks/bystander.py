@@ -48,6 +48,7 @@ from typing import Any, Optional, Sequence
 from harness import load
 from harness.capture import CATEGORIES
 from harness.cli import add_server_feedback_depth, int_list, name_list
+from harness.machine import environment_facts
 from harness.report import fmt
 
 REPO = Path(__file__).resolve().parent.parent
@@ -279,7 +280,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
             'command': ' '.join([Path(sys.executable).name, '-m', 'benchmarks.bystander',
                                  *(sys.argv[1:] if argv is None else argv)]),
             'date': datetime.datetime.now().astimezone().isoformat(timespec='seconds'),
-            'machine': load.environment_facts(),
+            'machine': environment_facts(),
             'args': {'neighbours': args.neighbours, 'sizes': args.sizes, 'goals': args.goals,
                      'rate_hz': args.rate, 'duration_s': args.duration, 'settle_s': args.settle,
                      'capture': not args.no_capture},

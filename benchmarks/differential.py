@@ -67,7 +67,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from harness.crash import core_backtrace, machine_line, plain_env, signal_name
-from harness.load import environment_facts
+from harness.machine import environment_facts
 from harness.proc import Proc, guard_command, main_or_role, python_module
 from harness.report import fmt, grid, say
 

@@ -43,6 +43,7 @@ from cft_action import guard
 from harness import client as load_client
 from harness import load
 from harness.domain import unused_domain
+from harness.machine import environment_facts
 from harness.proc import Proc, python_module
 
 REPO = Path(__file__).resolve().parent.parent
@@ -157,7 +158,7 @@ def main() -> None:
         f'first-feedback-{now:%Y-%m-%d}-{platform.node()}-{args.uuids}.json'
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(json.dumps({'date': now.isoformat(), 'host': platform.node(),
-                               'machine': load.environment_facts(), 'args': vars(args),
+                               'machine': environment_facts(), 'args': vars(args),
                                'load_average': os.getloadavg(), 'rows': rows}, indent=1))
     print(f'\nresults: {out}')
 

@@ -35,7 +35,7 @@ from rclpy.action import ActionClient as PlainActionClient
 from test_msgs.action import Fibonacci
 
 from cft_action import ActionClient
-from harness import load
+from harness.machine import environment_facts
 from harness.proc import Proc, python_module
 from harness.ros import RosSession
 from harness.server import feedback_reader_gids
@@ -103,7 +103,7 @@ def main() -> None:
     args = parser.parse_args()
     configs = args.configs.split(',')
     started = datetime.datetime.now(datetime.timezone.utc)
-    header = {'date_utc': f'{started:%Y-%m-%d %H:%M}', 'machine': load.environment_facts(),
+    header = {'date_utc': f'{started:%Y-%m-%d %H:%M}', 'machine': environment_facts(),
               'command': 'python -m benchmarks.first_goal_reader ' + ' '.join(
                   f'--{k} {v}' for k, v in vars(args).items()),
               'load_average_at_start': os.getloadavg()}

@@ -54,6 +54,7 @@ from typing import Any, Optional, Sequence
 
 from harness import load
 from harness.crash import live_backtrace, machine_line, plain_env
+from harness.machine import environment_facts
 from harness.procstat import Sampler, profile
 from harness.proc import Proc, ROOT, guard_command, python_module
 from harness.report import fmt, markdown_table, say
@@ -482,7 +483,7 @@ def write_result(out: Path, now: datetime.datetime, opts: argparse.Namespace,
                  complete: bool) -> None:
     """Write the result file: machine, date, command, load averages, tables and raw phases."""
     result = {
-        'date': now.isoformat(), 'host': platform.node(), 'machine': load.environment_facts(),
+        'date': now.isoformat(), 'host': platform.node(), 'machine': environment_facts(),
         'command': ' '.join([os.path.basename(sys.executable), '-m', 'benchmarks.many_goals',
                              *(argv if argv is not None else sys.argv[1:])]),
         'args': {k: str(v) if isinstance(v, Path) else v for k, v in vars(opts).items()},

@@ -49,7 +49,7 @@ from typing import Any, Callable, Optional, Sequence
 from harness import netns
 from harness.cli import int_list
 from harness.domain import unused_domain
-from harness.load import environment_facts
+from harness.machine import environment_facts
 from harness.polling import wait_until
 from harness.proc import main_or_role, Proc, python_module
 from harness.procstat import cpu_s

@@ -41,6 +41,7 @@ from pathlib import Path
 from typing import Any, Optional, Sequence
 
 from harness import load
+from harness.machine import environment_facts
 from harness.report import fmt, grid, markdown_table
 
 REPO = Path(__file__).resolve().parent.parent
@@ -309,7 +310,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         'benchmark': 'server_cost', 'started': started.isoformat(timespec='seconds'),
         'command': 'python -m benchmarks.server_cost ' + ' '.join(sys.argv[1:] if argv is None
                                                                  else argv),
-        'machine': load.environment_facts(), 'order': order, 'rate_hz': args.rate,
+        'machine': environment_facts(), 'order': order, 'rate_hz': args.rate,
         'points': []}
     total = len(args.guards) * len(args.sizes) * len(args.clients)
     t0 = time.monotonic()

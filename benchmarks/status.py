@@ -50,6 +50,7 @@ from typing import Any, Callable, Optional, Sequence
 
 from harness import load
 from harness.cli import int_list, name_list
+from harness.machine import environment_facts
 from harness.proc import Proc
 from harness.report import fmt, markdown_table
 from harness.status_model import (INFO_DST, MESSAGES_PER_GOAL, STATUS_ENTRY, WIRE_OVERHEAD,
@@ -243,7 +244,7 @@ def run(args: argparse.Namespace) -> Path:
         'benchmark': 'status',
         'command': ' '.join(['python', '-m', 'benchmarks.status', *sys.argv[1:]]),
         'date': datetime.datetime.now().astimezone().isoformat(timespec='seconds'),
-        'machine': load.environment_facts(),
+        'machine': environment_facts(),
         'model': {'messages_per_goal': MESSAGES_PER_GOAL, 'wire_overhead': WIRE_OVERHEAD,
                   'info_dst_single_reader': INFO_DST, 'status_entry_bytes': STATUS_ENTRY},
         'points': [],

@@ -40,6 +40,7 @@ from harness import load
 from harness.cli import name_list
 from harness.crash import machine_line, plain_env
 from harness.domain import unused_domain
+from harness.machine import environment_facts
 from harness.proc import guard_command, Proc, python_module, ROOT
 from harness.report import fmt, markdown_table, say
 
@@ -183,7 +184,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     say(machine_line())
     result: dict[str, Any] = {
         'benchmark': 'status_observer', 'date': now.isoformat(timespec='seconds'),
-        'host': platform.node(), 'machine': load.environment_facts(),
+        'host': platform.node(), 'machine': environment_facts(),
         'command': ' '.join(['python', '-m', 'benchmarks.status_observer',
                              *(argv if argv is not None else sys.argv[1:])]),
         'args': {k: str(v) if isinstance(v, Path) else v for k, v in vars(args).items()},

@@ -43,6 +43,7 @@ from typing import Any, Optional, Sequence
 
 from harness import load
 from harness.cli import add_server_feedback_depth, float_list, int_list, name_list
+from harness.machine import environment_facts
 from harness.report import fmt
 
 REPO = Path(__file__).resolve().parent.parent
@@ -121,7 +122,7 @@ def run(args: argparse.Namespace) -> Path:
     results: dict[str, Any] = {
         'command': ' '.join([Path(sys.executable).name, '-m', 'benchmarks.sweep', *sys.argv[1:]]),
         'date': datetime.datetime.now().astimezone().isoformat(timespec='seconds'),
-        'machine': load.environment_facts(),
+        'machine': environment_facts(),
         'grid': {'clients': args.clients, 'goals': args.goals, 'rates_hz': args.rates,
                  'sizes': args.sizes, 'duration_s': args.duration, 'configs': args.configs,
                  'anatomy': args.anatomy, 'guard': args.guard},

@@ -48,7 +48,7 @@ from pathlib import Path
 from typing import Any, Optional
 
 from harness.crash import machine_line, plain_env
-from harness.load import environment_facts
+from harness.machine import environment_facts
 from harness.proc import Proc, guard_command, main_or_role, python_module
 from harness.report import say
 

@@ -36,6 +36,7 @@ from typing import Optional, Sequence
 
 from harness import load
 from harness.cli import add_server_feedback_depth
+from harness.machine import environment_facts
 
 #: rclpy's default feedback depth (``ActionServer``'s ``feedback_pub_qos_profile``, keep-last 10).
 RCLPY_FEEDBACK_DEPTH = 10
@@ -88,7 +89,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
     progress(f'load: {spec.clients} client processes x {spec.goals} goals, {spec.order} '
              f'feedback messages per goal at {spec.rate_hz:g} Hz; configurations: '
              + ', '.join(load.CONFIG_LABELS[c] for c in args.configs))
-    machine = load.environment_facts()  # before the run: its load average is the one at the start
+    machine = environment_facts()  # before the run: its load average is the one at the start
     result = load.run_load(spec, args.configs, progress)
     if args.unguarded:
         progress('a second server, without the guard: '

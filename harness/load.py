@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import dataclasses
 import os
-import platform
 import statistics
 import time
 from typing import Any, Callable, Optional, Sequence
@@ -38,7 +37,6 @@ from typing import Any, Callable, Optional, Sequence
 from cft_action.action.client import FINISHED_GOAL_GRACE
 from harness import netns
 from harness.capture import CATEGORIES
-from harness.crash import fastdds_library
 from harness.domain import unused_domain
 from harness.proc import Proc, python_module
 from harness.report import fmt, grid
@@ -566,34 +564,6 @@ def run_load(spec: LoadSpec, configs: Sequence[str], progress: Progress = print,
     return {'spec': dataclasses.asdict(spec), 'queue_depth': run.depth,
             'bytes_method': run.bytes_method, 'network_note': run.network_note,
             'domain_id': run.env['ROS_DOMAIN_ID'], 'phases': phases}
-
-
-def environment_facts() -> dict[str, Any]:
-    """Machine and versions, for a result file."""
-    from importlib import metadata
-    versions: dict[str, Optional[str]] = {}
-    for dist in ('ros-jazzy-rclpy', 'rclpy', 'ros-rcl', 'ros-rcl-action', 'ros-rmw-fastrtps-cpp',
-                 'ros-fastrtps', 'cft-action', 'matplotlib'):
-        try:
-            versions[dist] = metadata.version(dist)
-        except metadata.PackageNotFoundError:
-            versions[dist] = None
-    cpu = ''
-    try:
-        with open('/proc/cpuinfo') as info:
-            cpu = next((line.split(':', 1)[1].strip() for line in info
-                        if line.startswith('model name')), '')
-    except OSError:
-        pass
-    return {'host': platform.node(), 'platform': platform.platform(),
-            'python': platform.python_version(), 'cpus': os.cpu_count(), 'cpu_model': cpu,
-            'load_average_at_start': os.getloadavg(), 'versions': versions,
-            'fastdds_library': fastdds_library(),
-            'rmw': os.environ.get('RMW_IMPLEMENTATION', 'rmw_fastrtps_cpp (default)'),
-            # The guard's switches, which the servers inherit (e.g. CFT_GUARD_KEEP_READERS=0).
-            'guard_environment': {
-                k: v for k, v in sorted(os.environ.items())
-                if k.startswith('CFT_GUARD_') or k == 'CFT_ACTION_READER_FILTERS'}}
 
 
 # --- presentation ---------------------------------------------------------------------------------

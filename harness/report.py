@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 from typing import Any, Callable, Optional, Sequence
 
+from harness.machine import environment_facts
 from harness.proc import ROOT
 
 
@@ -42,8 +43,6 @@ def results_start(benchmark: str, out: Optional[Path], argv: Optional[Sequence[s
     :param argv: the arguments of ``main``, or None for ``sys.argv``'s.
     :return: (the file, ``{'benchmark', 'started', 'command', 'machine'}``).
     """
-    from harness import load  # load reports through this module
-
     started = datetime.datetime.now(datetime.timezone.utc)
     name = benchmark.replace('_', '-')
     output = out or (ROOT / 'benchmarks' / 'results' /
@@ -51,7 +50,7 @@ def results_start(benchmark: str, out: Optional[Path], argv: Optional[Sequence[s
     arguments = sys.argv[1:] if argv is None else argv
     return output, {'benchmark': benchmark, 'started': started.isoformat(timespec='seconds'),
                     'command': f'python -m benchmarks.{benchmark} ' + ' '.join(arguments),
-                    'machine': load.environment_facts()}
+                    'machine': environment_facts()}
 
 
 def say(*words: object) -> None:
