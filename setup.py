@@ -4,9 +4,10 @@
 Their sources are in ``cft_action/native/``, by the process they run in:
 
 - ``native/guard/`` builds ``_cftguard``, the server guard, ``LD_PRELOAD``-ed into servers:
-  ``_guard.c`` (the locks and the interposed Fast DDS members), ``_guard_filter.c`` (the DDS-SQL
-  accelerator), ``_guard_writer_qos.c`` (the writers' filtered-reader limit and mark),
-  ``_guard_heartbeats.c`` and ``_guard_log.c``;
+  ``_guard.c`` (the locks and the interposed Fast DDS members), ``_guard_families.c`` (which Fast
+  DDS is loaded and where its real members are), ``_guard_filter.c`` (the DDS-SQL accelerator),
+  ``_guard_writer_qos.c`` (the writers' filtered-reader limit and mark), ``_guard_heartbeats.c``,
+  ``_guard_replies.c``, ``_guard_status.c`` and ``_guard_log.c``;
 - ``native/reader/`` builds ``_cftreader``, loaded with ctypes by ``cft_action._rcl`` into every
   process that changes a filter or takes an action client's status: the reader lock, the reader's
   filter class, the writer marks, the PLT patcher, the status trim and the response filter;

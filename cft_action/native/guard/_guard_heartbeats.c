@@ -87,7 +87,7 @@
 #include <time.h>
 
 #include "_fastdds_layout.h"
-#include "_guard.h"
+#include "_guard_families.h"
 #include "_guard_log.h"
 #include "_guard_status.h"
 

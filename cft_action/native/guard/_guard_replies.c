@@ -54,7 +54,7 @@
 #include <string.h>
 
 #include "_fastdds_layout.h"
-#include "_guard.h"
+#include "_guard_families.h"
 #include "_guard_filter.h"
 #include "_guard_log.h"
 #include "_guard_replies.h"

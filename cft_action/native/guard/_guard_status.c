@@ -101,7 +101,7 @@
 #include "_endpoint_times.h"
 #include "_fastdds_layout.h"
 #include "_filter_class.h"
-#include "_guard.h"
+#include "_guard_families.h"
 #include "_guard_log.h"
 #include "_guard_status.h"
 

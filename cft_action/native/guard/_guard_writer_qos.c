@@ -42,7 +42,7 @@
 
 #include "_fastdds_layout.h"
 #include "_filter_class.h"
-#include "_guard.h"
+#include "_guard_families.h"
 #include "_guard_log.h"
 
 #define GET_DATAWRITER_QOS \

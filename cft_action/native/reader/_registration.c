@@ -5,6 +5,7 @@
 // and then calls the real member. The reader is constructed, its attributes (times, filter
 // member) are set, and no writer is matched yet.
 #define _GNU_SOURCE
+#include <pthread.h>
 #include <stdbool.h>
 #include <stdio.h>
 
@@ -21,6 +22,13 @@ typedef bool (*register_reader_fn)(void *self, void *reader, const void *topic, 
 
 static struct cft_install installed = CFT_INSTALL_INIT;
 
+// The parts' functions, in the order they installed; a slot is written before the count that
+// covers it (release), and never changed.
+#define MAX_PARTS 4
+static cft_registering_fn parts[MAX_PARTS];
+static int part_count;
+static pthread_mutex_t parts_lock = PTHREAD_MUTEX_INITIALIZER;
+
 #if CFT_LAYOUT_KNOWN
 static register_reader_fn real_register_reader;
 
@@ -28,8 +36,8 @@ static bool register_reader(void *self, void *reader, const void *topic, const v
                             const void *content_filter) {
   if (reader != NULL) {
     const char *name = (const char *)topic + TOPIC_NAME;  // a fixed_string<255>'s characters
-    cft_response_filter_registering(reader, name, content_filter);
-    cft_status_acks_registering(reader, name, content_filter);
+    int count = __atomic_load_n(&part_count, __ATOMIC_ACQUIRE);
+    for (int i = 0; i < count; i++) parts[i](reader, name, content_filter);
   }
   return real_register_reader(self, reader, topic, qos, content_filter);
 }
@@ -51,8 +59,18 @@ static int install(struct cft_install *once) {
 #endif
 }
 
-int cft_registration_install(struct cft_install *once) {
+int cft_registration_install(struct cft_install *once, cft_registering_fn part) {
   int status = cft_install_once(&installed, install);
-  if (status < 0) snprintf(once->error, sizeof once->error, "%s", installed.error);
-  return status;
+  if (status < 0) {
+    snprintf(once->error, sizeof once->error, "%s", installed.error);
+    return status;
+  }
+  pthread_mutex_lock(&parts_lock);
+  int count = part_count;
+  if (count < MAX_PARTS) {
+    parts[count] = part;
+    __atomic_store_n(&part_count, count + 1, __ATOMIC_RELEASE);
+  }
+  pthread_mutex_unlock(&parts_lock);
+  return count < MAX_PARTS ? status : cft_install_fail(once, -6, "too many parts", "registration");
 }

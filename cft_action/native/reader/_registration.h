@@ -2,7 +2,8 @@
 //
 // The readers of this process, looked at as Fast DDS registers them (_registration.c), for the
 // parts that adjust the readers of the library's action clients: _response_filter.c and
-// _status_acks.c. Each is called with the RTPSReader, its TopicAttributes and its
+// _status_acks.c. Each part gives its own function when it installs (so calls go one way, from
+// the parts into this file), which is then called with the RTPSReader, its topic name and its
 // ContentFilterProperty (NULL without a filter) before the real registration, so before any
 // writer is matched and any receive thread reads the reader.
 #ifndef CFT_ACTION_REGISTRATION_H_
@@ -10,13 +11,11 @@
 
 #include "_patch.h"
 
-// 0 once every reader registered from now on is shown to the parts below; < 0 after recording in
-// `once` why not (the caller's cft_install record: each part installs through this).
-int cft_registration_install(struct cft_install *once);
+typedef void (*cft_registering_fn)(void *reader, const char *topic_name,
+                                   const void *content_filter);
 
-void cft_response_filter_registering(void *reader, const char *topic_name,
-                                     const void *content_filter);
-void cft_status_acks_registering(void *reader, const char *topic_name,
-                                 const void *content_filter);
+// 0 once every reader registered from now on is shown to `part`; < 0 after recording in `once` why
+// not (the caller's cft_install record: each part installs through this, once).
+int cft_registration_install(struct cft_install *once, cft_registering_fn part);
 
 #endif  // CFT_ACTION_REGISTRATION_H_

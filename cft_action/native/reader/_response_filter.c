@@ -133,8 +133,7 @@ static struct response_filter *request_filter(void) {
   return current;
 }
 
-void cft_response_filter_registering(void *reader, const char *topic_name,
-                                     const void *content_filter) {
+static void registering(void *reader, const char *topic_name, const void *content_filter) {
   if (requested && content_filter == NULL && is_response_topic(topic_name)) {
     uintptr_t member = data_filter_member((uintptr_t)reader);
     struct response_filter *filter = member != 0 ? request_filter() : NULL;
@@ -147,7 +146,13 @@ void cft_response_filter_registering(void *reader, const char *topic_name,
 }
 #endif
 
-static int install(struct cft_install *once) { return cft_registration_install(once); }
+static int install(struct cft_install *once) {
+#if CFT_LAYOUT_KNOWN
+  return cft_registration_install(once, registering);
+#else
+  return cft_install_fail(once, -5, "no Fast DDS layout at build time", CFT_LAYOUT_SOURCE);
+#endif
+}
 
 // 0 once response readers created inside cft_response_filter_begin/end get the filter; < 0 if
 // that cannot be arranged (cft_response_filter_error says why). Later calls return the first

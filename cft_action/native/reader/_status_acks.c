@@ -60,7 +60,6 @@ static __thread int adjusted_here;   // on this thread, since cft_status_acks_ta
 static __thread char refused[160];   // why the last status reader on this thread was left alone
 
 #if CFT_LAYOUT_KNOWN
-static bool armed;                   // set once installed
 static update_times_fn update_times;
 static uintptr_t reader_vptr;
 
@@ -93,9 +92,8 @@ static uintptr_t times_member(uintptr_t reader) {
   return member;
 }
 
-void cft_status_acks_registering(void *reader, const char *topic_name,
-                                 const void *content_filter) {
-  if (!__atomic_load_n(&armed, __ATOMIC_ACQUIRE) || content_filter == NULL ||
+static void registering(void *reader, const char *topic_name, const void *content_filter) {
+  if (content_filter == NULL ||
       strncmp((const char *)content_filter + CFP_CLASS_NAME, CFT_STATUS_CLASS,
               sizeof CFT_STATUS_CLASS) != 0 ||
       !ends_with(topic_name, STATUS_SUFFIX))
@@ -122,9 +120,7 @@ static int install(struct cft_install *once) {
   if (cft_resolve(once, FASTRTPS_SONAME, names, 2, resolved, &status) == NULL) return status;
   update_times = (update_times_fn)resolved[0];
   reader_vptr = (uintptr_t)resolved[1] + CFT_VTABLE_START;
-  if ((status = cft_registration_install(once)) < 0) return status;
-  __atomic_store_n(&armed, true, __ATOMIC_RELEASE);
-  return 0;
+  return cft_registration_install(once, registering);
 #endif
 }
 
