@@ -46,13 +46,16 @@ def _sourced(workspace: Path, command: str, env: dict[str, str]) -> subprocess.C
         cwd=workspace, capture_output=True, text=True, timeout=60)
 
 
-def test_pip_installs_no_ros_wheel_without_the_jazzy_extra():
+def test_pip_installs_no_ros_wheel_without_the_jazzy_or_kilted_extra():
     """`pip install cft-action` next to an existing ROS must not bring a second ROS from PyPI."""
     requirements = importlib.metadata.requires('cft-action') or []
     always = [r for r in requirements if 'extra ==' not in r]
     assert always == ['pyyaml>=6'], always
     ros = [r for r in requirements if r.startswith('ros-')]
-    assert len(ros) == 3 and all(r.endswith('extra == "jazzy"') for r in ros), ros
+    for distro in ('jazzy', 'kilted'):
+        of_distro = [r for r in ros if r.endswith(f'extra == "{distro}"')]
+        assert len(of_distro) == 3 and all(r.startswith(f'ros-{distro}-') for r in of_distro), ros
+    assert len(ros) == 6, ros
 
 
 @pytest.fixture(scope='module')
