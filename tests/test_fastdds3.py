@@ -12,11 +12,14 @@
 - Fast-DDS#4878 on 3.2: a guarded server and a client that changes its DDS-SQL filter 1,000 times at
   a 0.5 ms feedback period both survive (the guard locks the writer's filter changes against its
   writes; the reader lock serializes the client's own evaluations with the changes). Unguarded, the
-  same server died after 134 and after 35 updates (docs/SAFETY.md, the command there).
+  same server died after 134 and after 35 updates (docs/SAFETY.md, the command there). The other
+  path, a filtered reader going away (``remove_reader_filter``, which 3.x locks itself), does not
+  deadlock against the guard's lock: 30 DDS-SQL clients created and destroyed at that period.
 """
 
 from __future__ import annotations
 
+import argparse
 import json
 import os
 import sys
@@ -25,11 +28,12 @@ from pathlib import Path
 import pytest
 
 from cft_action import _rcl
+from harness import hazard
 from harness.capture import data_by_port
 from harness.ros import unique_name
 from tests.support import feedback_on_the_wire
 from tests.test_action_client import run_clients, start_server
-from tests.test_guard import churn_scenario
+from tests.test_guard import FEEDBACK_PERIOD, churn_scenario
 
 
 def _fast_dds_3() -> bool:
@@ -82,3 +86,15 @@ def test_the_guarded_server_and_a_churning_dds_sql_client_survive_1000_updates(
     assert outcome['server'] == 'alive' and 'server_at_stop' not in outcome, dump
     assert outcome['guard_calls']['process_reader_filter_info'] >= 1000, dump
     assert not any('inactive' in line for line in outcome['guard_messages']), dump
+
+
+def test_filtered_readers_that_go_away_neither_crash_nor_hang_a_guarded_server(
+        monkeypatch) -> None:
+    monkeypatch.setenv('CFT_ACTION_WRITER_FILTERING', 'any')
+    cell = hazard.Cell('destroy', FEEDBACK_PERIOD, 'small', True, 30)
+    opts = argparse.Namespace(interval=0.02, settle=0.3, k=1, keep_cores=False)
+    outcome = hazard.run_cell(cell, opts, domain=int(os.environ['ROS_DOMAIN_ID']))
+    dump = json.dumps(outcome, indent=1)
+    assert 'error' not in outcome and outcome['survived'] and outcome['events'] == 30, dump
+    assert outcome['server'] == 'alive' and 'server_at_stop' not in outcome, dump
+    assert outcome['guard_calls']['remove_reader_filter'] >= 30, dump
