@@ -22,7 +22,7 @@ VENV ?= $(if $(filter 3.11,$(PYTHON_VERSION)),.venv,.venv-$(PYTHON_VERSION))
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: test test-kilted lint demo bench clean compat
+.PHONY: test test-kilted test-asan lint demo bench clean compat
 
 # [jazzy] is ROS 2 Jazzy from PyPI, so that a machine without ROS needs nothing else.
 $(VENV)/bin/python:
@@ -54,12 +54,45 @@ $(KILTED_VENV)/.installed: pyproject.toml
 	$(KILTED_VENV)/bin/python -m pip install --quiet --disable-pip-version-check '.[kilted,test]'
 	touch $@
 
+# A copy of this tree's files (tracked, and untracked but not ignored) in $(1), for a build of the
+# C libraries that must not replace this tree's own.
+define copy-tree
+	rm -rf $(1) && mkdir -p $(1)
+	git ls-files -z --cached --others --exclude-standard | xargs -0 cp --parents -t $(1)
+endef
+
 test-kilted: $(KILTED_VENV)/.installed
-	rm -rf $(KILTED_TREE) && mkdir -p $(KILTED_TREE)
-	git ls-files -z --cached --others --exclude-standard | xargs -0 cp --parents -t $(KILTED_TREE)
+	$(call copy-tree,$(KILTED_TREE))
 	cd $(KILTED_TREE) && $(CURDIR)/$(KILTED_VENV)/bin/python -m pip install --quiet \
 	    --disable-pip-version-check --no-deps -e .
 	cd $(KILTED_TREE) && $(CURDIR)/$(KILTED_VENV)/bin/python -m pytest $(KILTED_TESTS)
+
+# The guard's and the client's C libraries built with AddressSanitizer and UBSan (in a copy of the
+# tree, ASAN_TREE), under the test files that run them: every process the tests start has the
+# sanitizers' runtimes preloaded (the guard's preload comes after them, hence
+# verify_asan_link_order=0; PYTHONPATH: the `cft-action` command imports the copy too), and the
+# first finding ends that process with its report, written to
+# $(ASAN_TREE)/sanitizer.<pid>: any such file fails the target, whatever the tests said. Leaks are
+# not checked (the Python interpreter's own would drown them).
+ASAN_TREE := build/asan-tree
+ASAN_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_uuid_class.py \
+    tests/test_node_class.py tests/test_reader_lock.py tests/test_rate_limit.py \
+    tests/test_goal_status.py tests/test_status_wire.py tests/test_replies.py \
+    tests/test_own_responses.py tests/test_heartbeats.py tests/test_signatures.py \
+    tests/test_reader_filter_limit.py tests/test_parameter_events.py
+SANITIZE := -fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer
+# A SIGSEGV is reported by ASan too (allow_user_segv_handler=0: Python's faulthandler would take it).
+SANITIZER_LOG := allow_user_segv_handler=0:log_path=$(CURDIR)/$(ASAN_TREE)/sanitizer
+test-asan: $(STAMP)
+	$(call copy-tree,$(ASAN_TREE))
+	cd $(ASAN_TREE) && CFLAGS='$(SANITIZE)' LDFLAGS='$(SANITIZE)' $(CURDIR)/$(PY) setup.py -q \
+	    build_ext --inplace
+	cd $(ASAN_TREE) && \
+	    LD_PRELOAD="$$(cc -print-file-name=libasan.so) $$(cc -print-file-name=libubsan.so)" \
+	    ASAN_OPTIONS=detect_leaks=0:verify_asan_link_order=0:halt_on_error=1:$(SANITIZER_LOG) \
+	    UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1:$(SANITIZER_LOG) \
+	    PYTHONPATH=$(CURDIR)/$(ASAN_TREE) $(CURDIR)/$(PY) -m pytest $(ASAN_TESTS)
+	@! ls $(ASAN_TREE)/sanitizer.* 2>/dev/null || { cat $(ASAN_TREE)/sanitizer.*; exit 1; }
 
 # ruff and mypy take their settings from pyproject.toml. ruff checks all the code (the library,
 # harness/, benchmarks/, tests/, demos/, compat/, setup.py; not the venvs, which it skips); mypy
