@@ -22,7 +22,7 @@ VENV ?= $(if $(filter 3.11,$(PYTHON_VERSION)),.venv,.venv-$(PYTHON_VERSION))
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: test test-kilted test-asan lint demo bench clean compat
+.PHONY: test test-kilted test-asan lint demo bench clean compat fuzz fuzz-toolchain
 
 # [jazzy] is ROS 2 Jazzy from PyPI, so that a machine without ROS needs nothing else.
 $(VENV)/bin/python:
@@ -120,6 +120,59 @@ COMPAT_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_uuid_c
 
 compat: $(STAMP)
 	compat/run.sh $(VENV) $(COMPAT_CACHE) "$(COMPAT_STACKS)" $(COMPAT_TESTS)
+
+# libFuzzer over every C entry point that parses another participant's bytes (fuzz/README.md):
+# each harness of fuzz/ built into build/fuzz/ with ASan and UBSan, then run for FUZZ_SECONDS on a
+# copy of its corpus (fuzz/corpus/<target>/, regressions included, so the repository's is never
+# written). Any crash, sanitizer report, leak or 10 s hang fails the run; the input is left in
+# build/fuzz/artifacts/. CI runs `make fuzz FUZZ_SECONDS=10`. The harnesses read Fast DDS objects at
+# the offsets of the headers the venv has: _fastdds_layout.h, generated as setup.py generates it.
+FUZZ_SECONDS ?= 60
+FUZZ_TARGETS := uuid node rate filter_class status_trim guard_status guard_filter writer_marks
+FUZZ_DIR := build/fuzz
+FUZZ_CC := clang-14
+FUZZ_CFLAGS := -g -O1 -Wall -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
+    -I$(FUZZ_DIR) -Icft_action/native -Icft_action/native/reader -Icft_action/native/guard
+NATIVE := cft_action/native
+# The library's files each harness links (a harness that includes one, for its statics, has it not).
+FUZZ_SOURCES_uuid := $(NATIVE)/_uuid_program.c
+FUZZ_SOURCES_node := $(NATIVE)/_node_program.c
+FUZZ_SOURCES_rate := $(NATIVE)/_rate_program.c
+FUZZ_CLASSES := $(NATIVE)/_filter_class.c $(NATIVE)/_uuid_program.c $(NATIVE)/_node_program.c \
+    $(NATIVE)/_rate_program.c
+FUZZ_SOURCES_filter_class := $(NATIVE)/reader/_status_trim.c $(FUZZ_CLASSES)
+FUZZ_SOURCES_guard_status := $(NATIVE)/guard/_guard_log.c $(NATIVE)/_endpoint_times.c \
+    fuzz/guard_stubs.c
+FUZZ_SOURCES_guard_filter := $(NATIVE)/guard/_guard_status.c $(FUZZ_SOURCES_guard_status) \
+    $(FUZZ_CLASSES)
+FUZZ_SOURCES_writer_marks := $(NATIVE)/reader/_patch.c
+# clang reads the cleanup variable of _guard_status.c's cft_rtps_is_relevant as unused.
+FUZZ_FLAGS_guard_status := -Wno-unused-variable
+FUZZ_FLAGS_guard_filter := -Wno-unused-variable
+
+fuzz-toolchain:
+	@command -v $(FUZZ_CC) >/dev/null && dpkg -s libfuzzer-14-dev >/dev/null 2>&1 || \
+	    { apt-get update && apt-get install -y clang-14 libfuzzer-14-dev llvm-14; }
+
+$(FUZZ_DIR)/_fastdds_layout.h: setup.py $(NATIVE)/_fastdds_layout.cpp $(STAMP)
+	$(PY) -c "import pathlib, runpy, setuptools; setuptools.setup = lambda **kw: None; \
+	    runpy.run_path('setup.py')['layout_header'](pathlib.Path('$(FUZZ_DIR)'))"
+
+$(FUZZ_DIR)/fuzz_%: fuzz/fuzz_%.c fuzz/fuzz_common.h fuzz/guard_stubs.c $(FUZZ_DIR)/_fastdds_layout.h \
+    $(shell find cft_action/native -name "*.[ch]") | fuzz-toolchain
+	$(FUZZ_CC) $(FUZZ_CFLAGS) $(FUZZ_FLAGS_$*) -o $@ $< $(FUZZ_SOURCES_$*) -ldl -lpthread
+
+fuzz: $(addprefix $(FUZZ_DIR)/fuzz_,$(FUZZ_TARGETS))
+	@failed=; for t in $(FUZZ_TARGETS); do \
+	    rm -rf $(FUZZ_DIR)/corpus/$$t && mkdir -p $(FUZZ_DIR)/corpus/$$t $(FUZZ_DIR)/artifacts && \
+	    cp fuzz/corpus/$$t/* $(FUZZ_DIR)/corpus/$$t/ && \
+	    if nice -n 10 $(FUZZ_DIR)/fuzz_$$t -max_total_time=$(FUZZ_SECONDS) -timeout=10 \
+	        -print_final_stats=1 -artifact_prefix=$(FUZZ_DIR)/artifacts/$$t- \
+	        $(FUZZ_DIR)/corpus/$$t > $(FUZZ_DIR)/$$t.log 2>&1; then \
+	      echo "fuzz_$$t: $$(grep -o 'Done [0-9]* runs in [0-9]* second' $(FUZZ_DIR)/$$t.log)," \
+	          "$$(grep -o 'cov: [0-9]* ft: [0-9]*' $(FUZZ_DIR)/$$t.log | tail -n 1)"; \
+	    else failed="$$failed $$t"; tail -n 60 $(FUZZ_DIR)/$$t.log; fi; \
+	done; test -z "$$failed" || { echo "fuzz: findings in$$failed (their inputs: $(FUZZ_DIR)/artifacts/)"; exit 1; }
 
 clean:
 	rm -rf .venv .venv-3.* .venv-kilted build *.egg-info cft_action/*.so .mypy_cache .ruff_cache

@@ -13,6 +13,8 @@ from action_msgs.msg import GoalStatus
 from test_msgs.action import Fibonacci
 from rclpy.action import ActionClient as RclpyActionClient
 
+from cft_action import _rcl
+from cft_action.topics.rate import RateFilter
 from cft_action import (ActionClient, create_filtered_subscription, guard, InvalidArgumentError,
                         poll, rate_filter_state, set_max_rate, stop_polling)
 from harness.ros import unique_name
@@ -202,6 +204,14 @@ def test_bad_arguments_name_themselves_and_leave_no_subscription(ros, rate, mess
         create_filtered_subscription(ros.node, Int32, '/' + unique_name('bad'), print, QOS,
                                      **rate)
     assert len(list(ros.node.subscriptions)) == before
+
+
+@pytest.mark.parametrize('max_rate', [1e-300, 1e-10, 2.0, 1e12])
+def test_any_valid_max_rate_is_in_the_class_grammar(max_rate):
+    """The grammar refuses periods past INT64_MAX ns (fuzz/README.md): slower rates are that one."""
+    expression = RateFilter(max_rate, None).expression()
+    assert _rcl.filter_class_accepts(_rcl.RATE_FILTER_CLASS, expression), expression
+    assert not _rcl.filter_class_accepts(_rcl.RATE_FILTER_CLASS, f'period={2**63}')
 
 
 def test_poll_needs_a_polled_subscription(ros):

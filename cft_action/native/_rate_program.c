@@ -3,8 +3,6 @@
 // See _rate_program.h.
 #include "_rate_program.h"
 
-#include <inttypes.h>
-#include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 
@@ -28,19 +26,42 @@ struct rate_program {
   struct rate_writer writer[RATE_WRITERS];
 };
 
+// A decimal of at least one digit, no sign, at most `max`, at *s; advances *s past it. False for
+// anything else, a number out of range included (sscanf's would saturate, or wrap a '-').
+static bool number(const char **s, uint64_t max, uint64_t *out) {
+  const char *p = *s;
+  uint64_t v = 0;
+  if (*p < '0' || *p > '9') return false;
+  for (; *p >= '0' && *p <= '9'; p++) {
+    unsigned digit = (unsigned)(*p - '0');
+    if (v > (max - digit) / 10) return false;
+    v = v * 10 + digit;
+  }
+  *s = p;
+  *out = v;
+  return true;
+}
+
+static bool literal(const char **s, const char *text) {
+  size_t n = strlen(text);
+  if (strncmp(*s, text, n) != 0) return false;
+  *s += n;
+  return true;
+}
+
 struct rate_program *cft_rate_compile(const char *expression) {
   if (expression == NULL) return NULL;
-  int64_t period;
-  uint64_t total = 0, last = 0;
-  int end = -1, polled_end = -1;
-  if (sscanf(expression, "period=%" SCNd64 "%n poll=%" SCNu64 "/%" SCNu64 "%n", &period, &end,
-             &total, &last, &polled_end) < 1 || end < 0 || period < 0)
+  const char *s = expression;
+  uint64_t period, total = 0, last = 0;
+  if (!literal(&s, "period=") || !number(&s, INT64_MAX, &period)) return NULL;
+  bool polling = literal(&s, " poll=");
+  if (polling && (!number(&s, UINT64_MAX, &total) || !literal(&s, "/") ||
+                  !number(&s, UINT64_MAX, &last) || last > total))
     return NULL;
-  bool polling = polled_end > 0;
-  if (expression[polling ? polled_end : end] != '\0' || (polling && last > total)) return NULL;
+  if (*s != '\0') return NULL;
   struct rate_program *p = calloc(1, sizeof *p);
   if (p == NULL) return NULL;
-  p->period_ns = period;
+  p->period_ns = (int64_t)period;
   p->polling = polling;
   p->total = total;
   p->last = last;
@@ -82,7 +103,8 @@ bool cft_rate_decide(struct rate_program *p, const uint8_t *writer_guid, int64_t
   if (w == NULL) return true;
   if (!writer_open(p, w, now_ns)) return false;
   w->passed = true;
-  w->next_ns = now_ns + p->period_ns;
+  // period_ns >= 0: only a sum past INT64_MAX can overflow; it saturates (no later sample passes)
+  w->next_ns = now_ns > INT64_MAX - p->period_ns ? INT64_MAX : now_ns + p->period_ns;
   if (p->polling) w->remaining--;
   return true;
 }

@@ -3,6 +3,8 @@
 // A rate limit and a poll count, decided per writer, for the CFT_ACTION_RATE class
 // (_filter_class.h). Its expressions are the ones cft_action.topics.rate writes:
 //     expr := 'period=' NS [ ' poll=' TOTAL '/' LAST ]
+// NS, TOTAL and LAST are decimal digits without a sign, NS at most INT64_MAX, the others at most
+// UINT64_MAX, LAST at most TOTAL; anything else (an out-of-range number too) does not compile.
 // NS: at most one sample per NS nanoseconds passes from each writer (0: no rate limit); the sample
 // that passes is the first one at least NS after the last that passed. With poll=: only polled
 // samples pass, TOTAL is the sum of every poll's count so far and LAST the last poll's count. A

@@ -67,6 +67,10 @@ class RateFilterState(NamedTuple):
     layout_mismatches: int = 0
 
 
+#: The rate class's largest period (INT64_MAX ns): its grammar refuses a larger number.
+MAX_PERIOD_NS = 2**63 - 1
+
+
 def check_max_rate(max_rate: Optional[float], name: str = 'max_rate') -> Optional[float]:
     """``max_rate`` as a float, or None; ``name``: the argument's, for the error.
 
@@ -108,7 +112,10 @@ class RateFilter:
 
     def expression(self) -> str:
         """The filter in the class's grammar (``cft_action/native/_rate_program.h``)."""
-        period = 0 if self.max_rate is None else max(1, round(1e9 / self.max_rate))
+        period = 0
+        if self.max_rate is not None:  # periods past the grammar's INT64_MAX ns (292 years) are it
+            ns = 1e9 / self.max_rate
+            period = MAX_PERIOD_NS if ns >= MAX_PERIOD_NS else max(1, round(ns))
         polled = f' poll={self.total}/{self.last}' if self.polling else ''
         return f'period={period}{polled}'
 

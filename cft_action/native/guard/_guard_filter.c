@@ -113,8 +113,10 @@ CFT_EXPORT unsigned long cft_guard_filter_count(int which) {
 // SHIFT_WINDOW bytes of the headers' m_guid, where m_key holds it too at the same distance; the
 // headers' layout from m_guid on, moved by that distance (`shift`), is then the layout. Every
 // reader's data is checked again before its filter is read: its GUID in m_guid and in m_key, sane
-// type, topic and class names, and a related topic name equal to the reader's topic name (Fast
-// DDS filters only then). One failed check turns the verdicts off for the process.
+// type, topic and class names and expression. One failed check turns the verdicts off for the
+// process. What the remote reader chose (a related topic name other than its topic name, where
+// Fast DDS does not filter, or an expression holding a NUL) is not a failed check: that reader's
+// verdicts are Fast DDS's.
 static bool layout_failed;  // set once, read without a lock: verdicts then all go to Fast DDS
 static pthread_mutex_t layout_lock = PTHREAD_MUTEX_INITIALIZER;
 #if CFT_LAYOUT_KNOWN
@@ -255,19 +257,18 @@ static bool read_reader_filter(const uint8_t *info, const uint8_t *guid, struct 
   *filtered = f->class_name[0] != '\0';
   if (!*filtered) return false;
   // Fast DDS filters for a reader only when its filter's related topic is the writer's topic,
-  // which the reader's topic is too (they matched).
-  if (strcmp(f->related, topic) != 0) {
-    layout_suspect("a filter's related topic name that is not its reader's topic name");
-    return false;
-  }
+  // which the reader's topic is too (they matched). Another related topic is the remote reader's
+  // choice, not a sign of the layout: the guard leaves such a reader to Fast DDS.
+  if (strcmp(f->related, topic) != 0) return false;
   size_t length;
   memcpy(&f->expression, cfp + CFP_EXPRESSION, sizeof f->expression);
   memcpy(&length, cfp + CFP_EXPRESSION + sizeof f->expression, sizeof length);
-  if (f->expression == NULL || length >= MAX_EXPRESSION || f->expression[length] != '\0' ||
-      memchr(f->expression, '\0', length) != NULL) {
+  if (f->expression == NULL || length >= MAX_EXPRESSION || f->expression[length] != '\0') {
     layout_suspect("the filter expression");
     return false;
   }
+  // A std::string holds what the remote reader sent, NULs too: no grammar of the guard's takes one.
+  if (memchr(f->expression, '\0', length) != NULL) return false;
   const uint8_t *begin, *end;
   memcpy(&begin, cfp + CFP_PARAMETERS + RLV_VECTOR, sizeof begin);
   memcpy(&end, cfp + CFP_PARAMETERS + RLV_VECTOR + sizeof begin, sizeof end);

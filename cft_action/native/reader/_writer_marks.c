@@ -133,11 +133,17 @@ static bool filter_class_at(const uint8_t *guid, char *out) {
 
 // Records the filter class of the reader `gid` from the GUID references kept since parse. The
 // first failure (reader_error) ends the reading for the process.
+// rmw passes create_rmw_gid two references there: the data's m_guid, and a temporary GUID_t on
+// its stack made from the data's participant key, which the remote participant announces as it
+// likes. When both hold the reader's GID, which one is m_guid cannot be told: the reader is not
+// read (and reading goes on for the others), rather than reading rmw's stack as discovery data.
 static void note_reader(const struct gid *gid) {
   const uint8_t *guid = NULL;
 #if READER_FILTERS_KNOWN
-  for (unsigned i = 0; i < guid_ref_count && guid == NULL; i++)
-    if (memcmp(guid_refs[i], gid->data, GID_SIZE) == 0) guid = guid_refs[i];
+  int holding = 0;
+  for (unsigned i = 0; i < guid_ref_count; i++)
+    if (memcmp(guid_refs[i], gid->data, GID_SIZE) == 0) guid = guid_refs[i], holding++;
+  if (holding > 1) return;
 #endif
   pthread_mutex_lock(&marked_lock);
   struct reader_filter_class *slot = &readers[reader_count % MARKED_SLOTS];
