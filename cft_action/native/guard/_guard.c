@@ -262,7 +262,8 @@ static void guard_created(void *filter) {
   __atomic_fetch_add(&filter_class_filters, 1, __ATOMIC_RELAXED);
   if (matching_writer == NULL) return;
   writer_guid_fn guid =
-      (writer_guid_fn)cft_guard_real(&real_writer_guid, cft_family_ready(0)->known_soname, WRITER_GUID2);
+      (writer_guid_fn)cft_guard_real(&real_writer_guid, cft_family_ready(0)->known_sonames[0],
+                                     WRITER_GUID2);
   if (guid != NULL) cft_filter_at_writer(filter, guid(matching_writer));
 }
 

@@ -26,10 +26,10 @@
 #include "_guard_log.h"
 
 static struct family families[] = {
-  {"Fast DDS 2", "libfastrtps.so.2.14", "libfastrtps.so", {PCNC2, PRFI2, RRF2, EVAL2, FIND, REL2},
+  {"Fast DDS 2", {"libfastrtps.so.2.14"}, "libfastrtps.so", {PCNC2, PRFI2, RRF2, EVAL2, FIND, REL2},
    {0}, 0, PTHREAD_MUTEX_INITIALIZER, ""},
-  {"Fast DDS 3", "libfastdds.so.3.2", "libfastdds.so", {PCNC3, PRFI3, RRF3, NULL, FIND, NULL}, {0},
-   0, PTHREAD_MUTEX_INITIALIZER, ""},
+  {"Fast DDS 3", {"libfastdds.so.3.6", "libfastdds.so.3.2"}, "libfastdds.so",
+   {PCNC3, PRFI3, RRF3, NULL, FIND, NULL}, {0}, 0, PTHREAD_MUTEX_INITIALIZER, ""},
 };
 #define N_FAMILIES ((int)(sizeof(families) / sizeof(families[0])))
 
@@ -115,20 +115,24 @@ static void resolve_locked(int fam, int from_call) {
   char where[512];
   int state = CFT_GUARD_INACTIVE;
 
-  void *handle = dlopen(f->known_soname, RTLD_LAZY | RTLD_NOLOAD);
+  const char *known = NULL;
+  void *handle = NULL;
+  for (int i = 0; handle == NULL && i < 3 && f->known_sonames[i] != NULL; i++)
+    if ((handle = dlopen(f->known_sonames[i], RTLD_LAZY | RTLD_NOLOAD)) != NULL)
+      known = f->known_sonames[i];
   if (handle != NULL) {
     int found = lookup_all(f, handle, real);
     // The handle is kept on purpose: the cached pointers must not outlive the library.
     if (found == FN_LOCKED && !loaded_after_fastdds) {
       state = CFT_GUARD_ACTIVE;
-      snprintf(f->reason, sizeof f->reason, "active: %s (%s)", f->known_soname,
+      snprintf(f->reason, sizeof f->reason, "active: %s (%s)", known,
                object_of(real[FN_PCNC], where, sizeof where));
     } else if (found == FN_LOCKED) {
       snprintf(f->reason, sizeof f->reason, "inactive: %.480s", late_reason);
     } else {
       snprintf(f->reason, sizeof f->reason,
                "inactive: %s is loaded but lacks %d of the %d DataWriterImpl members this guard "
-               "wraps; not locking", f->known_soname, FN_LOCKED - found, FN_LOCKED);
+               "wraps; not locking", known, FN_LOCKED - found, FN_LOCKED);
     }
   } else {
     // Not the known version. Find the real definitions anyway, to call straight through.
@@ -156,9 +160,11 @@ static void resolve_locked(int fam, int from_call) {
     if (found == 0 && seen == NULL && !from_call) return;  // nothing of this family loaded yet
     if (found > 0) {
       snprintf(f->reason, sizeof f->reason,
-               "inactive: %s is not a Fast DDS version this guard knows (it knows %s); calling "
-               "it directly, without locking", object_of(real[real[0] ? 0 : real[1] ? 1 : 2],
-                                                         where, sizeof where), f->known_soname);
+               "inactive: %s is not a Fast DDS version this guard knows (it knows %s%s%s); "
+               "calling it directly, without locking",
+               object_of(real[real[0] ? 0 : real[1] ? 1 : 2], where, sizeof where),
+               f->known_sonames[0], f->known_sonames[1] ? ", " : "",
+               f->known_sonames[1] ? f->known_sonames[1] : "");
     } else if (from_call) {
       snprintf(f->reason, sizeof f->reason,
                "inactive: cannot find the real %s DataWriterImpl members (loaded: %s); writes "

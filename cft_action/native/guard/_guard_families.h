@@ -63,7 +63,7 @@ enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND
 // else is written before the release store and never changed afterwards.
 struct family {
   const char *label;
-  const char *known_soname;   // the one version whose ABI and behaviour were checked
+  const char *known_sonames[3];  // the versions whose ABI and behaviour were checked (NULL ends)
   const char *prefix;         // basename prefix of any library of this family
   const char *names[FN_COUNT];
   void *real[FN_COUNT];

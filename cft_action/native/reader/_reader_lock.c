@@ -99,6 +99,8 @@ static const struct family {
 } families[] = {
   {"libfastrtps.so.2.14",
    {IS_RELEVANT_OF(IS_RELEVANT_ARGS2), IS_RELEVANT_THUNK_OF(IS_RELEVANT_ARGS2), CREATE_FILTER}},
+  {"libfastdds.so.3.6",
+   {IS_RELEVANT_OF(IS_RELEVANT_ARGS3), IS_RELEVANT_THUNK_OF(IS_RELEVANT_ARGS3), CREATE_FILTER}},
   {"libfastdds.so.3.2",
    {IS_RELEVANT_OF(IS_RELEVANT_ARGS3), IS_RELEVANT_THUNK_OF(IS_RELEVANT_ARGS3), CREATE_FILTER}},
 };
@@ -114,7 +116,7 @@ static int install(struct cft_install *once) {
   }
   if (family == NULL)
     return cft_install_fail(once, -1, "no Fast DDS whose members it knows is loaded",
-                            "libfastrtps.so.2.14, libfastdds.so.3.2");
+                            "libfastrtps.so.2.14, libfastdds.so.3.6, libfastdds.so.3.2");
   void *resolved[3];
   int status;
   void *library = cft_resolve(once, family->soname, family->names, 3, resolved, &status);
