@@ -22,7 +22,7 @@ VENV ?= $(if $(filter 3.11,$(PYTHON_VERSION)),.venv,.venv-$(PYTHON_VERSION))
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: test test-kilted lint demo bench clean compat
+.PHONY: test test-kilted kilted-tree lint demo bench clean compat compat-kilted
 
 # [jazzy] is ROS 2 Jazzy from PyPI, so that a machine without ROS needs nothing else.
 $(VENV)/bin/python:
@@ -54,11 +54,13 @@ $(KILTED_VENV)/.installed: pyproject.toml
 	$(KILTED_VENV)/bin/python -m pip install --quiet --disable-pip-version-check '.[kilted,test]'
 	touch $@
 
-test-kilted: $(KILTED_VENV)/.installed
+kilted-tree: $(KILTED_VENV)/.installed
 	rm -rf $(KILTED_TREE) && mkdir -p $(KILTED_TREE)
 	git ls-files -z --cached --others --exclude-standard | xargs -0 cp --parents -t $(KILTED_TREE)
 	cd $(KILTED_TREE) && $(CURDIR)/$(KILTED_VENV)/bin/python -m pip install --quiet \
 	    --disable-pip-version-check --no-deps -e .
+
+test-kilted: kilted-tree
 	cd $(KILTED_TREE) && $(CURDIR)/$(KILTED_VENV)/bin/python -m pytest $(KILTED_TESTS)
 
 # ruff and mypy take their settings from pyproject.toml. ruff checks all the code (the library,
@@ -87,6 +89,14 @@ COMPAT_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_uuid_c
 
 compat: $(STAMP)
 	compat/run.sh $(VENV) $(COMPAT_CACHE) "$(COMPAT_STACKS)" $(COMPAT_TESTS)
+
+# The same on Fast DDS 3 stacks under Kilted's wheels (KILTED_VENV, the package in KILTED_TREE as
+# for test-kilted): Lyrical's Fast DDS 3.6.2 with its rmw_fastrtps, `wheels` for Kilted's own 3.2.2.
+KILTED_COMPAT_STACKS ?= lyrical-3.6.2
+KILTED_COMPAT_TESTS ?= $(KILTED_TESTS)
+compat-kilted: kilted-tree
+	cd $(KILTED_TREE) && compat/run.sh $(CURDIR)/$(KILTED_VENV) $(COMPAT_CACHE) \
+	    "$(KILTED_COMPAT_STACKS)" $(KILTED_COMPAT_TESTS)
 
 clean:
 	rm -rf .venv .venv-3.* .venv-kilted build *.egg-info cft_action/*.so .mypy_cache .ruff_cache
