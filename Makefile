@@ -22,7 +22,8 @@ VENV ?= $(if $(filter 3.11,$(PYTHON_VERSION)),.venv,.venv-$(PYTHON_VERSION))
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: test test-kilted test-asan lint demo bench clean compat fuzz fuzz-toolchain
+.PHONY: test test-kilted kilted-tree test-asan lint demo bench clean compat compat-kilted fuzz \
+    fuzz-toolchain
 
 # [jazzy] is ROS 2 Jazzy from PyPI, so that a machine without ROS needs nothing else.
 $(VENV)/bin/python:
@@ -61,10 +62,12 @@ define copy-tree
 	git ls-files -z --cached --others --exclude-standard | xargs -0 cp --parents -t $(1)
 endef
 
-test-kilted: $(KILTED_VENV)/.installed
+kilted-tree: $(KILTED_VENV)/.installed
 	$(call copy-tree,$(KILTED_TREE))
 	cd $(KILTED_TREE) && $(CURDIR)/$(KILTED_VENV)/bin/python -m pip install --quiet \
 	    --disable-pip-version-check --no-deps -e .
+
+test-kilted: kilted-tree
 	cd $(KILTED_TREE) && $(CURDIR)/$(KILTED_VENV)/bin/python -m pytest $(KILTED_TESTS)
 
 # The guard's and the client's C libraries built with AddressSanitizer and UBSan (in a copy of the
@@ -120,6 +123,14 @@ COMPAT_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_uuid_c
 
 compat: $(STAMP)
 	compat/run.sh $(VENV) $(COMPAT_CACHE) "$(COMPAT_STACKS)" $(COMPAT_TESTS)
+
+# The same on Fast DDS 3 stacks under Kilted's wheels (KILTED_VENV, the package in KILTED_TREE as
+# for test-kilted): Lyrical's Fast DDS 3.6.2 with its rmw_fastrtps, `wheels` for Kilted's own 3.2.2.
+KILTED_COMPAT_STACKS ?= lyrical-3.6.2
+KILTED_COMPAT_TESTS ?= $(KILTED_TESTS)
+compat-kilted: kilted-tree
+	cd $(KILTED_TREE) && compat/run.sh $(CURDIR)/$(KILTED_VENV) $(COMPAT_CACHE) \
+	    "$(KILTED_COMPAT_STACKS)" $(KILTED_COMPAT_TESTS)
 
 # libFuzzer over every C entry point that parses another participant's bytes (fuzz/README.md):
 # each harness of fuzz/ built into build/fuzz/ with ASan and UBSan, then run for FUZZ_SECONDS on a

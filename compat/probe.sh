@@ -5,9 +5,18 @@
 #   compat/probe.sh VENV            the wheels' headers (VENV/include)
 #   compat/probe.sh VENV STACK      a stack's installed headers (STACK/install/include/fastrtps),
 #                                   the venv's fastcdr and foonathan_memory headers after them
+# Fast DDS 3 headers (fastdds/config.hpp: a Kilted venv's VENV/include, a Fast DDS 3 stack's
+# STACK/install/include/fastdds) give their build options only: the layout probe is 2.14's.
 set -euo pipefail
 venv=$(realpath "$1"); stack=${2:+$(realpath "$2")}
 root=$(cd "$(dirname "$0")/.." && pwd)
+if [ -n "$stack" ]; then three=$stack/install/include/fastdds/fastdds/config.hpp; else three=$venv/include/fastdds/config.hpp; fi
+if [ -e "$three" ]; then
+  echo "headers: $three"
+  grep -E '^#define (HAVE_SECURITY|HAVE_SQLITE3|FASTDDS_VERSION_STR) ' "$three"
+  echo "layout probe: Fast DDS 2.14 only (cft_action/native/_fastdds_layout.cpp), not run"
+  exit 0
+fi
 inc=()
 if [ -n "$stack" ]; then
   inc+=("-I$stack/install/include/fastrtps")

@@ -9,7 +9,7 @@
 #
 # A stack is prebuilt (docs/COMPATIBILITY.md, "The stacks"); a missing one fails and says so.
 # For each stack: its environment (compat/stack_env.sh) is exported, so pytest and every process
-# the tests start load that stack's libfastrtps and rmw_fastrtps; compat/verify_stack.py checks it
+# the tests start load that stack's Fast DDS and rmw_fastrtps; compat/verify_stack.py checks it
 # is really mapped and that plain ROS works on it; then pytest runs the files. Output goes to
 # CACHE/results/<stack>-<UTC time>/ (probe.txt: compat/probe.sh's layout facts of the stack's
 # headers; verify.txt, pytest.txt, junit.xml, summary.txt).
@@ -20,10 +20,15 @@ venv=$(realpath "$1"); cache=$(realpath -m "$2"); stacks=$3; shift 3
 here=$(cd "$(dirname "$0")" && pwd); root=$(dirname "$here")
 cd "$root"
 status=0
-wheels() {  # the ROS wheel versions a venv has
+wheels() {  # the ROS wheel versions a venv has (Jazzy's Fast DDS is ros-fastrtps, Kilted's ros-fastdds)
   "$1/bin/python" -c 'import importlib.metadata as m
-print(" ".join(p + "==" + m.version(p) for p in ("ros-fastrtps", "ros-rmw-fastrtps-shared-cpp",
-      "ros-rmw-fastrtps-cpp", "ros-rcl", "ros-rclpy")))'
+def v(p):
+    try:
+        return [p + "==" + m.version(p)]
+    except m.PackageNotFoundError:
+        return []
+print(" ".join(sum((v(p) for p in ("ros-fastrtps", "ros-fastdds", "ros-rmw-fastrtps-shared-cpp",
+      "ros-rmw-fastrtps-cpp", "ros-rcl", "ros-rclpy")), [])))'
 }
 have=$(_ROS_WHEELS_BOOTSTRAP_COMPLETE=0 wheels "$venv")
 for stack in $stacks; do

@@ -2,8 +2,9 @@
 # Print the environment (as `export` lines) that runs VENV's python on the Fast DDS + rmw_fastrtps
 # of a compatibility stack:   eval "$(compat/stack_env.sh VENV STACK)"
 #
-# STACK is a directory whose install/lib holds libfastrtps.so.2.14, librmw_fastrtps_shared_cpp.so
-# and librmw_fastrtps_cpp.so (see docs/COMPATIBILITY.md). _ROS_WHEELS_BOOTSTRAP_COMPLETE=1 stops
+# STACK is a directory whose install/lib holds one Fast DDS (libfastrtps.so.2.14 for a Jazzy venv,
+# libfastdds.so.3.<minor> for a Kilted one), librmw_fastrtps_shared_cpp.so and librmw_fastrtps_cpp.so
+# (see docs/COMPATIBILITY.md). _ROS_WHEELS_BOOTSTRAP_COMPLETE=1 stops
 # ros-wheels-bootstrapper from re-executing python with an LD_LIBRARY_PATH of its own (built from a
 # set, in no fixed order), so this one, with the stack first, is inherited by every subprocess.
 # STACK "wheels" (or empty) prints the same for the wheels' own libraries, in a fixed order.
@@ -14,7 +15,13 @@ venv=$(realpath "$1"); stack=${2:-wheels}
 first= preload=
 if [ "$stack" != wheels ]; then
   stack=$(realpath "$stack")
-  for lib in libfastrtps.so.2.14 librmw_fastrtps_shared_cpp.so librmw_fastrtps_cpp.so; do
+  # The stack's Fast DDS: 2.14's libfastrtps, or 3.x's libfastdds (the newest 3.<minor> soname there).
+  dds=libfastrtps.so.2.14
+  if [ ! -e "$stack/install/lib/$dds" ]; then
+    dds=$(cd "$stack/install/lib" && ls libfastdds.so.3.* 2>/dev/null | grep -E '^libfastdds\.so\.3\.[0-9]+$' | sort -V | tail -1)
+    [ -n "$dds" ] || { echo "stack_env.sh: no libfastrtps.so.2.14 or libfastdds.so.3.* in $stack/install/lib" >&2; exit 2; }
+  fi
+  for lib in "$dds" librmw_fastrtps_shared_cpp.so librmw_fastrtps_cpp.so; do
     [ -e "$stack/install/lib/$lib" ] || { echo "stack_env.sh: no $lib in $stack/install/lib" >&2; exit 2; }
   done
   first="$stack/install/lib:"
@@ -23,7 +30,7 @@ if [ "$stack" != wheels ]; then
   # compiled against the system's tinyxml2, would run the wheels' (LD_DEBUG=bindings showed
   # XMLDocument's constructor and Parse bound so). Preloading the one it was linked to puts that
   # first; nothing else of the wheels calls tinyxml2 (their Fast DDS and rmw are the ones replaced).
-  xml=$(readelf -d "$stack/install/lib/libfastrtps.so.2.14" | sed -n 's/.*NEEDED.*\[\(libtinyxml2[^]]*\)\].*/\1/p')
+  xml=$(readelf -d "$stack/install/lib/$dds" | sed -n 's/.*NEEDED.*\[\(libtinyxml2[^]]*\)\].*/\1/p')
   if [ -n "$xml" ]; then
     # (awk reads to the end: an early exit would SIGPIPE ldconfig, and pipefail end this script)
     xml=$(ldconfig -p | awk -v n="$xml" '$1 == n && !found { print $NF; found = 1 }')

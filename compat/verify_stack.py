@@ -7,9 +7,14 @@ Run with the stack's environment (compat/stack_env.sh), from the repository root
 
 It starts a plain rclpy action server (test_msgs/Fibonacci) in a second process, then in this one:
 
-- checks both processes' ``/proc/<pid>/maps``: ``libfastrtps.so.2.14`` and
-  ``librmw_fastrtps_shared_cpp.so`` must come from ``STACK/install/lib`` (or, with ``wheels``, from
-  the venv), and no other copy of either may be mapped;
+- checks both processes' ``/proc/<pid>/maps``: the Fast DDS library (``libfastrtps.so.2.14``, or
+  ``libfastdds.so.3.<minor>`` for a Fast DDS 3 stack), ``librmw_fastrtps_shared_cpp.so`` and
+  ``librmw_fastrtps_cpp.so`` must come from ``STACK/install/lib`` (or, with ``wheels``, from the
+  venv), and no other copy of any may be mapped; so must ``libfastcdr.so`` if the stack has one;
+- checks that no mapped library needs versioned symbols (``readelf -V``) of a Fast DDS soname other
+  than the mapped one's: a library of the wheels built against another Fast DDS would run on this
+  one's ABI (a Fast DDS 3 stack answers the wheels' ``NEEDED libfastdds.so.3.2``, which rcl and
+  rclpy carry without using a symbol of it, with its own library; see docs/COMPATIBILITY.md);
 - waits for the server (``wait_for_server``), sends a goal, and requires acceptance, feedback and
   the result;
 - queries the graph: the server node's publishers, subscriptions, services by node, and the
@@ -22,6 +27,7 @@ cft_action code: it tests the stack, not the library.
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 import time
@@ -41,6 +47,26 @@ def mapped(pid: int, name: str) -> set[str]:
         if len(parts) == 6 and os.path.basename(parts[5]).startswith(name):
             paths.add(parts[5])
     return paths
+
+
+def soname(path: str) -> str:
+    """The DT_SONAME of the ELF file at ``path`` ('' if none)."""
+    out = subprocess.run(['readelf', '-dW', path], capture_output=True, text=True).stdout
+    found = re.search(r'\(SONAME\)\s+Library soname: \[([^]]+)\]', out)
+    return found.group(1) if found else ''
+
+
+def foreign_needs(pid: int, dds: str) -> list[str]:
+    """Mapped libraries that need versioned symbols of a Fast DDS soname other than ``dds``."""
+    bad = []
+    for path in sorted(mapped(pid, 'lib')):
+        if '.so' not in os.path.basename(path) or not os.path.exists(path):
+            continue
+        out = subprocess.run(['readelf', '-VW', path], capture_output=True, text=True).stdout
+        for name in re.findall(r'File: (lib(?:fastdds|fastrtps)\.so[.0-9]*)', out):
+            if name != dds:
+                bad.append(f'{os.path.basename(path)} needs {name}')
+    return bad
 
 
 def serve() -> None:
@@ -79,6 +105,8 @@ def main() -> int:
         libdir = str(Path(sys.prefix, 'lib').resolve())
     else:
         libdir = str(Path(stack, 'install', 'lib').resolve())
+    # The family: 2.14's libfastrtps, or 3.x's libfastdds.
+    dds = 'libfastrtps.so' if Path(libdir, 'libfastrtps.so.2.14').exists() else 'libfastdds.so'
     os.environ.setdefault('ROS_DOMAIN_ID', str(unused_domain()))
     os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
     failed = []
@@ -105,11 +133,16 @@ def main() -> int:
             client = ActionClient(node, Fibonacci, ACTION)
             # Only now is the rmw (and so Fast DDS) loaded in this process.
             for who, pid in (('client', os.getpid()), ('server', server.pid)):
-                for lib in ('libfastrtps.so', 'librmw_fastrtps_shared_cpp.so',
-                            'librmw_fastrtps_cpp.so'):
+                # A stack that brings its own Fast-CDR (3.6 needs 2.3.6) must have it mapped.
+                cdr = ('libfastcdr.so',) if Path(libdir, 'libfastcdr.so.2').exists() else ()
+                for lib in (dds, 'librmw_fastrtps_shared_cpp.so', 'librmw_fastrtps_cpp.so') + cdr:
                     paths = {str(Path(p).resolve()) for p in mapped(pid, lib)}
                     good = len(paths) == 1 and os.path.dirname(next(iter(paths))) == libdir
                     check(f'maps_{who}_{lib}', good, sorted(paths))
+                    if lib == dds and len(paths) == 1:
+                        name = soname(next(iter(paths)))
+                        bad = foreign_needs(pid, name)
+                        check(f'needs_{who}_only_{name}', not bad, bad[:5])
             t0 = time.monotonic()
             check('wait_for_server', client.wait_for_server(timeout_sec=10.0),
                   f'{time.monotonic() - t0:.2f} s')
