@@ -7,8 +7,8 @@ the discovery thread replaces the writer's per-reader filters without the writer
 publish evaluates them (eProsima/Fast-DDS issue 4878). No client-side setting prevents it.
 
 The guard is a small C library, built with this package from ``cft_action/native/guard/`` and the
-filter classes in ``cft_action/native/`` (``_guard_families.h`` lists the parts; setup.py builds them, and
-takes the Fast DDS layouts they read from the Fast DDS headers it finds). Preloaded into
+filter classes in ``cft_action/native/`` (``_guard_families.h`` lists the parts; setup.py builds
+them, and takes the Fast DDS layouts they read from the Fast DDS headers it finds). Preloaded into
 the **server** process, it serializes each writer's publish path with the discovery path that
 changes that writer's filters. The server's code does not change::
 

@@ -101,7 +101,8 @@ C_DEFINITION = re.compile(r'^(?!extern\b)[A-Za-z_][^;{}()]*?\b(cft_\w+)\s*(?:\([
 def test_no_c_file_uses_a_file_that_uses_it_back() -> None:
     """By header (``#include "x.h"`` of ``x.c``) and by name: a file that names a ``cft_`` function
     or variable defined in another uses it, whichever header declares it."""
-    sources = {path.stem: path.read_text() for path in (ROOT / 'cft_action' / 'native').rglob('*.c')}
+    native = ROOT / 'cft_action' / 'native'
+    sources = {path.stem: path.read_text() for path in native.rglob('*.c')}
     defined = {name: stem for stem, text in sources.items() for name in C_DEFINITION.findall(text)}
     graph = {}
     for stem, text in sources.items():
