@@ -8,7 +8,7 @@ import sys
 import threading
 import time
 import uuid
-from typing import Callable, NoReturn, Sequence
+from typing import Callable, NoReturn, Optional, Sequence
 
 import rclpy
 from rclpy.context import Context
@@ -22,12 +22,18 @@ def unique_name(prefix: str) -> str:
 
 
 class RosSession:
-    """An rclpy context with one node and a single-threaded executor."""
+    """An rclpy context with one node and a single-threaded executor.
 
-    def __init__(self, executor_class: type[Executor] = SingleThreadedExecutor,
-                 **executor_args) -> None:
-        self.context = Context()
-        rclpy.init(context=self.context)
+    :param context: an initialised context to make the node in, which :meth:`close` leaves to its
+        owner (one participant for several sessions); None: a context of the session's own.
+    """
+
+    def __init__(self, executor_class: type[Executor] = SingleThreadedExecutor, *,
+                 context: Optional[Context] = None, **executor_args) -> None:
+        self._own_context = context is None
+        self.context = Context() if context is None else context
+        if self._own_context:
+            rclpy.init(context=self.context)
         self.node = Node(unique_name('test_node'), context=self.context)
         self.executor = executor_class(context=self.context, **executor_args)
         self.executor.add_node(self.node)
@@ -48,7 +54,8 @@ class RosSession:
     def close(self) -> None:
         self.executor.shutdown(timeout_sec=5)
         self.node.destroy_node()
-        rclpy.shutdown(context=self.context)
+        if self._own_context:
+            rclpy.shutdown(context=self.context)
 
 
 def leave_spinning_process(executor: Executor, threads: Sequence[threading.Thread],

@@ -377,6 +377,11 @@ def feedback_on_the_wire(clients: Sequence[tuple[str, str]], capture: Callable[.
                          goals: int, order: int, *, server_env: Optional[dict] = None,
                          feedback_depth: Optional[int] = None) -> WireRun:
     """:func:`clients_on_the_wire` for a guarded server's feedback writer: one client per (mode,
-    writer_filtering), each sending ``goals`` goals of ``order`` feedback messages."""
+    writer_filtering), each sending ``goals`` goals of ``order`` feedback messages.
+
+    The clients start together: each proves its feedback path before ``READY``, and nothing is
+    captured or counted before all are ready, so their discoveries of the server (up to Fast
+    DDS's 3 s announcement period each) may overlap."""
     return clients_on_the_wire([(mode, goals, order, filtering) for mode, filtering in clients],
-                               capture, server_env=server_env, feedback_depth=feedback_depth)
+                               capture, server_env=server_env, feedback_depth=feedback_depth,
+                               together=True)

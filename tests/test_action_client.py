@@ -46,25 +46,35 @@ def server():
         child.stop()
 
 
-def run_clients(server, action, mode, clients, goals, order):
-    """Client processes (tests/helpers/fib_client.py), one after another ready, then all sending
-    their goals; their reports. Each proved its feedback path before it was ready, so the server
-    published feedback before the goals: ``server_published_since_ready`` is what it published
-    after that client was ready, ``server_published_since_go`` what it published for the goals."""
+def run_clients(server, action, mode, clients, goals, order, *, one_by_one=False):
+    """Client processes (tests/helpers/fib_client.py), all ready, then all sending their goals;
+    their reports. Each proved its feedback path before it was ready, so the server published
+    feedback before the goals: ``server_published_since_go`` is what it published for the goals.
+
+    They start together, their discoveries of the server (up to Fast DDS's 3 s announcement
+    period each) overlapping; with ``one_by_one``, one after another ready, and
+    ``server_published_since_ready`` is then what the server published after that client was
+    ready (the later clients' proofs included), which a client that takes every sample took."""
     children, published_at_ready = [], []
     try:
         for _ in range(clients):
             children.append(helper_process('tests.helpers.fib_client',
-                                           [action, mode, goals, order]))
-            published_at_ready.append(server_published(server))
+                                           [action, mode, goals, order],
+                                           ready='READY' if one_by_one else ''))
+            if one_by_one:
+                published_at_ready.append(server_published(server))
+        if not one_by_one:
+            for child in children:
+                child.expect('READY', 60)
         published_at_go = server_published(server)
         for child in children:
             child.send('go')
         reports = [json.loads(c.expect('RESULT', timeout=90).split(' ', 1)[1]) for c in children]
         published = server_published(server)
-        return [{**report, 'server_published_since_ready': published - ready,
-                 'server_published_since_go': published - published_at_go}
-                for report, ready in zip(reports, published_at_ready)]
+        since_ready = [{'server_published_since_ready': published - ready}
+                       for ready in published_at_ready] or [{}] * len(reports)
+        return [{**report, **ready, 'server_published_since_go': published - published_at_go}
+                for report, ready in zip(reports, since_ready)]
     finally:
         for child in children:
             child.stop()
@@ -83,7 +93,10 @@ def test_three_clients_each_get_exactly_their_own_feedback(ros, mode, guarded):
     action = '/' + unique_name('fib')
     child = start_server(action, guarded=guarded)
     try:
-        reports = run_clients(child, action, mode, clients, goals, order)
+        # 'off' takes every sample: one by one, so that what each client took after it was
+        # ready is what the server published after it.
+        reports = run_clients(child, action, mode, clients, goals, order,
+                              one_by_one=mode == 'off')
         assert child.poll() is None, 'server died'
     finally:
         child.stop()

@@ -1,12 +1,17 @@
 """The README's install path for users of apt's ROS 2 Jazzy, run with this machine's externally
 managed ``python3`` (PEP 668): a venv with ``--system-site-packages`` beside a sourced ROS.
 
+What it checks is the system's Python (``/usr/bin/python3``), whatever Python runs pytest. Where
+that is one of the Pythons the suite runs on (:data:`SUITE_PYTHONS`, as ``.ci/run`` does), the
+suite of that Python runs it (3.11 on Debian 12, Noble's 3.12 on Ubuntu 24.04), and the other
+suite skips it: it would repeat the same check after downloading the wheels again.
+
 There is no apt ROS here. ``tests.helpers.ros_prefix`` lays out a prefix shaped like
 ``/opt/ros/jazzy`` from the ROS wheels, and a ``setup.bash`` that exports what apt's does for
 Python (``AMENT_PREFIX_PATH``, ``PYTHONPATH``, ``LD_LIBRARY_PATH``). The wheels come from this
-test's venv when its Python is the system's version, and otherwise (``make test
-PYTHON=python3.12`` on a machine whose system Python is 3.11) from a venv of the system Python
-into which this test installs them from PyPI (measured: 12 s). Apt's ROS takes NumPy, PyYAML and
+test's venv when its Python is the system's version, and otherwise (a system Python that no
+suite runs on) from a venv of the system Python into which this test installs them from PyPI
+(measured: 12 s). Apt's ROS takes NumPy, PyYAML and
 lark from the system's Python; here they are in the prefix, beside rclpy: the test shows where
 ``rclpy`` and ``cft_action`` come from, not where rclpy's own requirements do.
 """
@@ -31,6 +36,8 @@ SYSTEM_PYTHON = Path('/usr/bin/python3')
 # measured on a 2-core machine: the install 7 s (its build downloads setuptools and ros-fastrtps
 # for pip's isolated build environment), the venv 3 s
 INSTALL_TIMEOUT = 300
+#: The Pythons of ROS 2 Jazzy's wheels, on each of which .ci/run runs the suite.
+SUITE_PYTHONS = ((3, 11), (3, 12))
 
 # Run in the venv after the README's commands: where each module comes from, and that the
 # library works there (its reader library loads and filters a real client's feedback).
@@ -98,6 +105,9 @@ def ros_wheels_python(version: tuple[int, int], tmp_path: Path, env: dict[str, s
 
 def test_readme_install_beside_apt_ros_with_an_externally_managed_python(tmp_path):
     version = system_python_version()
+    if version != sys.version_info[:2] and version in SUITE_PYTHONS:
+        pytest.skip(f'checks the system Python {version[0]}.{version[1]}, whatever Python runs '
+                    f'pytest: the suite on Python {version[0]}.{version[1]} runs it')
     marker = Path(f'/usr/lib/python{version[0]}.{version[1]}/EXTERNALLY-MANAGED')
     assert marker.is_file(), f'{SYSTEM_PYTHON} is not externally managed (no {marker})'
     env = shell_env()

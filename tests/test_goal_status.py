@@ -311,6 +311,9 @@ def test_every_goal_handle_sees_what_plain_rclpy_gives(ros, mode, guarded):
     server = start_server(action, guarded=guarded, period=0.02)
     others = None
     try:
+        # The plain client starts now, so that its discovery of the server (up to Fast DDS's 3 s
+        # announcement period) overlaps this client's set-up; it sends its goals on 'go' below.
+        others = helper_process('harness.client', [action, 'rclpy', 60, 5, 1000], ready='')
         # Every client's response reader gets the responses to all clients: rclpy's keep-last
         # 10 would drop some in this burst, as for plain rclpy (README, "Differences from rclpy").
         deep = QoSProfile(depth=1000, reliability=ReliabilityPolicy.RELIABLE)
@@ -319,7 +322,7 @@ def test_every_goal_handle_sees_what_plain_rclpy_gives(ros, mode, guarded):
                                 cancel_service_qos_profile=deep)
         assert client.wait_for_server(timeout_sec=20)
         assert round_trip(ros, client), 'the server never answered a goal'
-        others = helper_process('harness.client', [action, 'rclpy', 60, 5, 1000], timeout=60)
+        others.expect('READY', 60)
         others.send('go')
         futures = [client.send_goal_async(Fibonacci.Goal(order=k % 6),
                                           (lambda _: None) if k % 2 else None)
@@ -417,6 +420,9 @@ def test_an_observer_without_live_goals_is_not_woken_by_others_status(ros, guard
     server = start_server(action, guarded=guarded, period=0.02)
     others = None
     try:
+        # Started now, so that its discovery of the server overlaps this client's set-up; its
+        # round trip before READY is one more goal whose status samples the trim drops.
+        others = helper_process('harness.client', [action, 'rclpy', 60, 2, 1000], ready='')
         client = ActionClient(ros.node, Fibonacci, action)
         assert client.goal_status_state.filtered and client.goal_status_state.prompt_acks
         assert client.wait_for_server(timeout_sec=20)
@@ -424,7 +430,7 @@ def test_an_observer_without_live_goals_is_not_woken_by_others_status(ros, guard
         table = client._status._table
         own_goals_ended(ros, client, table)
         before = client.goal_status_state
-        others = helper_process('harness.client', [action, 'rclpy', 60, 2, 1000], timeout=60)
+        others.expect('READY', 60)
         others.send('go')
         assert ros.spin_until(lambda: server_done(server, 60 + 2), 60), server.tail()
         ros.spin_for(0.5)

@@ -31,20 +31,25 @@ MODES = ('guarded', 'unguarded')
 
 
 def start_publishers(mode):
-    """Two publishers of ints on one topic, each in its own process: the topic and the processes."""
+    """Two publishers of ints on one topic, each in its own process, started (the caller waits
+    for their READY): the topic and the processes."""
     prefix = '/' + unique_name('cft_rate')
     env = guard.environment() if mode == 'guarded' else None
-    return prefix + '/ints', [helper_process('tests.helpers.publisher', [prefix, 10], env=env)
-                              for _ in BASES]
+    return prefix + '/ints', [helper_process('tests.helpers.publisher', [prefix, 10], env=env,
+                                             ready='') for _ in BASES]
 
 
 @pytest.fixture
 def runs():
-    """Guarded and unguarded publishers, side by side: mode -> (topic, processes)."""
+    """Guarded and unguarded publishers, side by side, started together: mode -> (topic,
+    processes)."""
     started = {}
     try:
         for mode in MODES:
             started[mode] = start_publishers(mode)
+        for _, children in started.values():
+            for child in children:
+                child.expect('READY', 30)
         yield started
     finally:
         for _, children in started.values():
