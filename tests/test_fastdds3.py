@@ -19,7 +19,6 @@
 
 from __future__ import annotations
 
-import argparse
 import json
 import os
 import sys
@@ -28,12 +27,11 @@ from pathlib import Path
 import pytest
 
 from cft_action import _rcl
-from harness import hazard
 from harness.capture import data_by_port
 from harness.ros import unique_name
 from tests.support import feedback_on_the_wire
 from tests.test_action_client import run_clients, start_server
-from tests.test_guard import FEEDBACK_PERIOD, churn_scenario
+from tests.test_guard import hazard_cell
 
 
 def _fast_dds_3() -> bool:
@@ -78,7 +76,7 @@ def test_a_guarded_server_filters_dds_sql_feedback_in_its_writer() -> None:
 def test_the_guarded_server_and_a_churning_dds_sql_client_survive_1000_updates(
         monkeypatch) -> None:
     monkeypatch.setenv('CFT_ACTION_WRITER_FILTERING', 'any')
-    outcome = churn_scenario(guarded=True, updates=1000)
+    outcome = hazard_cell('update', guarded=True, bound=1000)
     dump = json.dumps(outcome, indent=1)
     assert 'error' not in outcome, dump
     assert (outcome['guard_status'] or '').startswith('active: libfastdds.so.3'), dump
@@ -91,9 +89,7 @@ def test_the_guarded_server_and_a_churning_dds_sql_client_survive_1000_updates(
 def test_filtered_readers_that_go_away_neither_crash_nor_hang_a_guarded_server(
         monkeypatch) -> None:
     monkeypatch.setenv('CFT_ACTION_WRITER_FILTERING', 'any')
-    cell = hazard.Cell('destroy', FEEDBACK_PERIOD, 'small', True, 30)
-    opts = argparse.Namespace(interval=0.02, settle=0.3, k=1, keep_cores=False)
-    outcome = hazard.run_cell(cell, opts, domain=int(os.environ['ROS_DOMAIN_ID']))
+    outcome = hazard_cell('destroy', guarded=True, bound=30, settle=0.3)
     dump = json.dumps(outcome, indent=1)
     assert 'error' not in outcome and outcome['survived'] and outcome['events'] == 30, dump
     assert outcome['server'] == 'alive' and 'server_at_stop' not in outcome, dump

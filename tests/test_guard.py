@@ -274,23 +274,24 @@ CHURN_INTERVAL = 0.02
 FEEDBACK_PERIOD = 0.0005
 
 
-def churn_scenario(guarded: bool, updates: int = CHURN_UPDATES) -> dict:
-    """Fast-DDS issue 4878's churn: the ``update`` cell of :mod:`harness.hazard`.
+def hazard_cell(event: str, guarded: bool, bound: int, settle: float = 0.5) -> dict:
+    """A cell of :mod:`harness.hazard` (Fast-DDS issue 4878's events) at a 0.5 ms feedback period.
 
     A server (guarded or not) publishing feedback every 0.5 ms to a goal that an ordinary client
-    keeps running, and a client that changes its feedback filter every 20 ms, ``updates`` times
-    (its class as ``CFT_ACTION_WRITER_FILTERING`` says: the library's, or DDS-SQL). Returns
-    what happened; the tests assert on it. The same cell with DDS-SQL on an unguarded server is
-    a measurement, not a test: ``CFT_ACTION_WRITER_FILTERING=any python -m benchmarks.hazard
-    --events update --guard off`` (docs/SAFETY.md).
+    keeps running, and a client of ``event`` up to ``bound`` times: ``update`` changes its
+    feedback filter every 20 ms, ``destroy`` creates, matches and destroys a filtered client
+    (``settle`` seconds for discovery each); its class as ``CFT_ACTION_WRITER_FILTERING`` says: the
+    library's, or DDS-SQL. Returns what happened; the tests assert on it. The update cell with
+    DDS-SQL on an unguarded server is a measurement, not a test: ``CFT_ACTION_WRITER_FILTERING=any
+    python -m benchmarks.hazard --events update --guard off`` (docs/SAFETY.md).
     """
-    cell = hazard.Cell('update', FEEDBACK_PERIOD, 'small', guarded, updates)
-    opts = argparse.Namespace(interval=CHURN_INTERVAL, settle=0.5, k=1, keep_cores=False)
+    cell = hazard.Cell(event, FEEDBACK_PERIOD, 'small', guarded, bound)
+    opts = argparse.Namespace(interval=CHURN_INTERVAL, settle=settle, k=1, keep_cores=False)
     return hazard.run_cell(cell, opts, domain=int(os.environ['ROS_DOMAIN_ID']))
 
 
 def test_churn_server_survives_with_the_guard() -> None:
-    outcome = churn_scenario(guarded=True)
+    outcome = hazard_cell('update', guarded=True, bound=CHURN_UPDATES)
     dump = json.dumps(outcome, indent=1)
     assert 'error' not in outcome, dump
     assert ('STATUS True ' + (outcome['guard_status'] or '')).startswith(KNOWN_ACTIVE), dump
@@ -306,7 +307,7 @@ def test_churn_server_survives_with_the_guard() -> None:
 def test_churn_of_the_library_filter_class_never_crashes_an_unguarded_server() -> None:
     """The default filter class is unknown to an unguarded server: it keeps no filter for the
     reader, so 200 filter changes at a 0.5 ms feedback period are nothing to it."""
-    outcome = churn_scenario(guarded=False)
+    outcome = hazard_cell('update', guarded=False, bound=CHURN_UPDATES)
     dump = json.dumps(outcome, indent=1)
     assert 'error' not in outcome, dump
     assert outcome['survived'] and outcome['events'] == CHURN_UPDATES, dump

@@ -173,7 +173,7 @@ static struct family *ready(int fam) {
     struct family *f = ready(FAM);                                                              \
     __atomic_fetch_add(&call_counts[FN_PCNC], 1, __ATOMIC_RELAXED);                             \
     pcnc_fn real = (pcnc_fn)f->real[FN_PCNC];                                                   \
-    if (real == NULL) { cft_family_missing(f, FN_PCNC); return RETCODE_ERROR; }                            \
+    if (real == NULL) { cft_family_missing(f, FN_PCNC); return RETCODE_ERROR; }                 \
     if (f->state != CFT_GUARD_ACTIVE) return real(self, kind, data, params, handle);            \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
     FILTERING_WRITER_IN_SCOPE(FILTERS && scoped_lock_ != NULL ? self : NULL);                   \
@@ -184,7 +184,7 @@ static struct family *ready(int fam) {
     struct family *f = ready(FAM);                                                              \
     __atomic_fetch_add(&call_counts[FN_PRFI], 1, __ATOMIC_RELAXED);                             \
     prfi_fn real = (prfi_fn)f->real[FN_PRFI];                                                   \
-    if (real == NULL) { cft_family_missing(f, FN_PRFI); return; }                                          \
+    if (real == NULL) { cft_family_missing(f, FN_PRFI); return; }                               \
     if (f->state != CFT_GUARD_ACTIVE) { real(self, guid, info); return; }                       \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
     CLAIM_IN_SCOPE(FILTERS && scoped_lock_ != NULL, self, guid, info);                          \
@@ -198,7 +198,7 @@ static struct family *ready(int fam) {
     struct family *f = ready(FAM);                                                              \
     __atomic_fetch_add(&call_counts[FN_RRF], 1, __ATOMIC_RELAXED);                              \
     rrf_fn real = (rrf_fn)f->real[FN_RRF];                                                      \
-    if (real == NULL) { cft_family_missing(f, FN_RRF); return; }                                           \
+    if (real == NULL) { cft_family_missing(f, FN_RRF); return; }                                \
     if (f->state != CFT_GUARD_ACTIVE) { real(self, guid); return; }                             \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
     real(self, guid);                                                                           \

@@ -106,6 +106,15 @@ static const char *object_of(void *addr, char *buf, size_t len) {
   return buf;
 }
 
+// The family's known sonames, comma-separated, in `buf`.
+static const char *known_names(const struct family *f, char *buf, size_t len) {
+  size_t used = 0;
+  buf[0] = '\0';
+  for (size_t i = 0; i < KNOWN_SONAMES && f->known_sonames[i] != NULL && used < len; i++)
+    used += snprintf(buf + used, len - used, "%s%s", i ? ", " : "", f->known_sonames[i]);
+  return buf;
+}
+
 // Sets the family's final state. Called with resolve_lock held and state == ARMED.
 // With from_call == 0 (a probe from cft_guard_state) it leaves the state ARMED when no library of
 // this family is loaded yet; from an interposed call it always decides.
@@ -117,7 +126,7 @@ static void resolve_locked(int fam, int from_call) {
 
   const char *known = NULL;
   void *handle = NULL;
-  for (int i = 0; handle == NULL && i < 3 && f->known_sonames[i] != NULL; i++)
+  for (size_t i = 0; handle == NULL && i < KNOWN_SONAMES && f->known_sonames[i] != NULL; i++)
     if ((handle = dlopen(f->known_sonames[i], RTLD_LAZY | RTLD_NOLOAD)) != NULL)
       known = f->known_sonames[i];
   if (handle != NULL) {
@@ -159,12 +168,12 @@ static void resolve_locked(int fam, int from_call) {
     int found = (real[0] != NULL) + (real[1] != NULL) + (real[2] != NULL);
     if (found == 0 && seen == NULL && !from_call) return;  // nothing of this family loaded yet
     if (found > 0) {
+      char known_list[128];
       snprintf(f->reason, sizeof f->reason,
-               "inactive: %s is not a Fast DDS version this guard knows (it knows %s%s%s); "
-               "calling it directly, without locking",
+               "inactive: %s is not a Fast DDS version this guard knows (it knows %s); calling "
+               "it directly, without locking",
                object_of(real[real[0] ? 0 : real[1] ? 1 : 2], where, sizeof where),
-               f->known_sonames[0], f->known_sonames[1] ? ", " : "",
-               f->known_sonames[1] ? f->known_sonames[1] : "");
+               known_names(f, known_list, sizeof known_list));
     } else if (from_call) {
       snprintf(f->reason, sizeof f->reason,
                "inactive: cannot find the real %s DataWriterImpl members (loaded: %s); writes "
@@ -209,6 +218,8 @@ void *cft_guard_real(void **cache, const char *soname, const char *name) {
 }
 
 int cft_guard_knows_fastdds2(void) {
+  // A process with a Fast DDS 3 loaded has no 2.14 to come: no probe at every writer's creation.
+  if (cft_loaded_family() != 0) return 0;
   if (__atomic_load_n(&families[0].state, __ATOMIC_ACQUIRE) == CFT_GUARD_ARMED) resolve(0, 0);
   return __atomic_load_n(&families[0].state, __ATOMIC_ACQUIRE) == CFT_GUARD_ACTIVE;
 }

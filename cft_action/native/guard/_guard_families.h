@@ -53,7 +53,8 @@ enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND
 #define EVAL2 "_ZNK8eprosima7fastdds3dds12DDSSQLFilter19DDSFilterExpression8evaluateERKNS_8fastrtps4rtps19SerializedPayload_tERKNS1_14IContentFilter16FilterSampleInfoERKNS5_6GUID_tE"
 #define REL2 "_ZNK8eprosima7fastdds3dds14DataWriterImpl11is_relevantERKNS_8fastrtps4rtps13CacheChange_tERKNS4_6GUID_tE"
 
-// Fast DDS 3.x (libfastdds), verified on libfastdds.so.3.2 from the ROS 2 Kilted wheels.
+// Fast DDS 3.x (libfastdds), verified on libfastdds.so.3.2 from the ROS 2 Kilted wheels and on a
+// 3.6.2 build with Lyrical's options (docs/COMPATIBILITY.md): the same names in both.
 #define PCNC3 "_ZN8eprosima7fastdds3dds14DataWriterImpl25perform_create_new_changeENS0_4rtps12ChangeKind_tEPKvRNS3_11WriteParamsERKNS3_16InstanceHandle_tE"
 #define PRFI3 "_ZN8eprosima7fastdds3dds14DataWriterImpl26process_reader_filter_infoERKNS0_4rtps6GUID_tERKNS3_28SubscriptionBuiltinTopicDataE"
 #define RRF3 "_ZN8eprosima7fastdds3dds14DataWriterImpl20remove_reader_filterERKNS0_4rtps6GUID_tE"
@@ -61,9 +62,11 @@ enum { FN_PCNC = 0, FN_PRFI = 1, FN_RRF = 2, FN_LOCKED = 3, FN_EVAL = 3, FN_FIND
 // One family per mangling (Fast DDS major version). Its state moves once, from ARMED to ACTIVE
 // or INACTIVE, under resolve_lock; `state` is read without the lock (acquire), and everything
 // else is written before the release store and never changed afterwards.
+#define KNOWN_SONAMES 3
 struct family {
   const char *label;
-  const char *known_sonames[3];  // the versions whose ABI and behaviour were checked (NULL ends)
+  const char *known_sonames[KNOWN_SONAMES];  // the versions whose ABI and behaviour were checked,
+                                             // the newest first (NULL ends)
   const char *prefix;         // basename prefix of any library of this family
   const char *names[FN_COUNT];
   void *real[FN_COUNT];

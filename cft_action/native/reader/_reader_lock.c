@@ -2,23 +2,24 @@
 //
 // The reader-side twin of the server guard, for the process that changes its filters.
 //
-// A Fast DDS DataReader (2.14, and 3.2 alike) evaluates its filter itself, in a receive thread, for every sample
-// whose writer did not filter for the reader's current filter: right after each filter change,
-// until the writer has the change. ContentFilteredTopicImpl::set_expression_parameters meanwhile
-// has DDSFilterFactory::create_content_filter build a new expression and clear the old one, with
-// no lock against that evaluation: the receive thread then evaluates a cleared expression and the
-// process dies (SIGSEGV in TypeDescriptor::get_element_type under DDSFilterExpression::evaluate,
-// under ContentFilteredTopicImpl::is_relevant). Measured: a subscription that changed its filter
-// in a loop while a publisher in another process sent at full rate died within seconds.
+// A Fast DDS DataReader (2.14 and 3.x alike) evaluates its filter itself, in a receive thread, for
+// every sample whose writer did not filter for the reader's current filter: right after each filter
+// change, until the writer has the change. ContentFilteredTopicImpl::set_expression_parameters
+// meanwhile has DDSFilterFactory::create_content_filter build a new expression and clear the old
+// one, with no lock against that evaluation: the receive thread then evaluates a cleared expression
+// and the process dies (SIGSEGV in TypeDescriptor::get_element_type under
+// DDSFilterExpression::evaluate, under ContentFilteredTopicImpl::is_relevant). Measured: a
+// subscription that changed its filter in a loop while a publisher in another process sent at full
+// rate died within seconds.
 //
-// This library, loaded with ctypes into the client's process (not preloaded), replaces two slots
-// of libfastrtps's vtables at run time: ContentFilteredTopicImpl::is_relevant (both its entry and
-// the thunk through IReaderDataFilter) takes a read lock, and DDSFilterFactory::
-// create_content_filter, where the reader's expression is swapped, takes the write lock. The
-// slots are found by their current value, the exported address of the member, so no object layout
-// is assumed. Readers that hold their RTPSReader's mutex wait only for the swap itself, which
-// takes no reader mutex, so the lock order cannot cycle. Fast DDS 3.2 (Kilted's wheels) has the
-// same members and vtables under its own soname and mangling (GUID_t and CacheChange_t moved to
+// This library, loaded with ctypes into the client's process (not preloaded), replaces two slots of
+// libfastrtps's vtables at run time: ContentFilteredTopicImpl::is_relevant (both its entry and the
+// thunk through IReaderDataFilter) takes a read lock, and DDSFilterFactory::create_content_filter,
+// where the reader's expression is swapped, takes the write lock. The slots are found by their
+// current value, the exported address of the member, so no object layout is assumed. Readers that
+// hold their RTPSReader's mutex wait only for the swap itself, which takes no reader mutex, so the
+// lock order cannot cycle. Fast DDS 3.2 (Kilted's wheels) and 3.6 (Lyrical) have the same members
+// and vtables under their own sonames and 3.x's mangling (GUID_t and CacheChange_t moved to
 // eprosima::fastdds::rtps; create_content_filter's name did not change): one row of `families`
 // each, the first whose library is loaded is patched.
 #define _GNU_SOURCE
@@ -38,6 +39,8 @@
 #define IS_RELEVANT_THUNK_OF(args) "_ZThn16_NK8eprosima7fastdds3dds24ContentFilteredTopicImpl" args
 #define IS_RELEVANT_ARGS2 "11is_relevantERKNS_8fastrtps4rtps13CacheChange_tERKNS4_6GUID_tE"
 #define IS_RELEVANT_ARGS3 "11is_relevantERKNS0_4rtps13CacheChange_tERKNS3_6GUID_tE"
+// A family's three names, by the mangling of is_relevant's arguments.
+#define NAMES_OF(args) {IS_RELEVANT_OF(args), IS_RELEVANT_THUNK_OF(args), CREATE_FILTER}
 #define FACTORY_VTABLE "_ZTVN8eprosima7fastdds3dds12DDSSQLFilter16DDSFilterFactoryE"
 #define CREATE_FILTER                                                                          \
   "_ZN8eprosima7fastdds3dds12DDSSQLFilter16DDSFilterFactory21create_content_filterEPKcS5_PKN" \
@@ -97,26 +100,27 @@ static const struct family {
   const char *soname;
   const char *names[3];
 } families[] = {
-  {"libfastrtps.so.2.14",
-   {IS_RELEVANT_OF(IS_RELEVANT_ARGS2), IS_RELEVANT_THUNK_OF(IS_RELEVANT_ARGS2), CREATE_FILTER}},
-  {"libfastdds.so.3.6",
-   {IS_RELEVANT_OF(IS_RELEVANT_ARGS3), IS_RELEVANT_THUNK_OF(IS_RELEVANT_ARGS3), CREATE_FILTER}},
-  {"libfastdds.so.3.2",
-   {IS_RELEVANT_OF(IS_RELEVANT_ARGS3), IS_RELEVANT_THUNK_OF(IS_RELEVANT_ARGS3), CREATE_FILTER}},
+  {"libfastrtps.so.2.14", NAMES_OF(IS_RELEVANT_ARGS2)},
+  {"libfastdds.so.3.6", NAMES_OF(IS_RELEVANT_ARGS3)},
+  {"libfastdds.so.3.2", NAMES_OF(IS_RELEVANT_ARGS3)},
 };
+#define N_FAMILIES (sizeof families / sizeof families[0])
 
 static int install(struct cft_install *once) {
   const struct family *family = NULL;
-  for (size_t i = 0; i < sizeof families / sizeof families[0] && family == NULL; i++) {
+  char known[128] = "";
+  for (size_t i = 0, used = 0; i < N_FAMILIES && family == NULL; i++) {
     void *loaded = dlopen(families[i].soname, RTLD_NOW | RTLD_NOLOAD);
     if (loaded != NULL) {
       dlclose(loaded);
       family = &families[i];
+    } else if (used < sizeof known) {
+      used += snprintf(known + used, sizeof known - used, "%s%s", i ? ", " : "",
+                       families[i].soname);
     }
   }
   if (family == NULL)
-    return cft_install_fail(once, -1, "no Fast DDS whose members it knows is loaded",
-                            "libfastrtps.so.2.14, libfastdds.so.3.6, libfastdds.so.3.2");
+    return cft_install_fail(once, -1, "no Fast DDS whose members it knows is loaded", known);
   void *resolved[3];
   int status;
   void *library = cft_resolve(once, family->soname, family->names, 3, resolved, &status);
