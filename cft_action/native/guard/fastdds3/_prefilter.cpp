@@ -11,7 +11,8 @@
 // intraprocess, late joiners; no limit of 32 as for content filters), with the change's
 // FilterSampleInfo (its sample identity and related sample identity), under the writer's own
 // filters mutex. A reader the prefilter refuses gets no DATA: a reliable one a GAP, as for any
-// content-filtered change. Nothing is written into the DATA (no filter signature).
+// content-filtered change. Nothing is written into the DATA (no filter signature). The prefilter
+// is not told a change's kind: a reply topic has no key, so every change of it is ALIVE.
 //
 // Built by setup.py only against Fast DDS 3.3+ headers, as its own library linked against that Fast
 // DDS (libfastdds.so.3.<minor>): its headers' constants have initializers that call into Fast DDS,
