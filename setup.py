@@ -160,11 +160,14 @@ def layout_header(build_temp: Path) -> None:
     out.append(f'#define CFT_FASTDDS3_PREFILTER {1 if layer else 0}')
     out.append('#define CFT_FASTDDS3_SONAME '
                + c_string(f'libfastdds.so.{version[0]}.{version[1]}' if layer else ''))
+    # Where the layer came from, or (a clause after "not built: ") why it was not built.
+    needs = (f'it needs Fast DDS {".".join(map(str, PREFILTER_SINCE))}+ headers (with '
+             'DataWriter::set_sample_prefilter) and their libfastdds.so')
     out.append('#define CFT_FASTDDS3_SOURCE ' + c_string(
         f'the headers and library of Fast DDS {version[0]}.{version[1]} in {three[0]}' if layer
-        else f'the headers of Fast DDS 3 in {three[0]} without its library beside them' if three
-        else f'{found}, not Fast DDS {".".join(map(str, PREFILTER_SINCE))}+ headers (no '
-             'DataWriter::set_sample_prefilter)'))
+        else f'setup.py: the headers of Fast DDS 3 in {three[0]}, but no libfastdds.so beside '
+             f'them; {needs}' if three
+        else f'setup.py: {found}; {needs}'))
     out.append('#endif  // CFT_ACTION_FASTDDS_LAYOUT_H_')
     (build_temp / LAYOUT_HEADER).write_text('\n'.join(out) + '\n')
     print(f'setup.py: Fast DDS layout from {source}; the guard\'s Fast DDS 3 layer '

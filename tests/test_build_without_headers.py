@@ -21,8 +21,8 @@ HEADERLESS = '\n'.join([
     '#ifndef CFT_ACTION_FASTDDS_LAYOUT_H_', '#define CFT_ACTION_FASTDDS_LAYOUT_H_',
     '#define CFT_LAYOUT_KNOWN 0', '#define CFT_LAYOUT_SOURCE "no Fast DDS headers"',
     '#define CFT_LAYOUT_INCLUDES ""', '#define CFT_FASTDDS3_PREFILTER 0',
-    '#define CFT_FASTDDS3_SONAME ""', '#define CFT_FASTDDS3_SOURCE "no Fast DDS headers"', '#endif',
-    ''])
+    '#define CFT_FASTDDS3_SONAME ""', '#define CFT_FASTDDS3_SOURCE "setup.py: no Fast DDS headers"',
+    '#endif', ''])
 
 
 @pytest.mark.parametrize('part', ['guard', 'reader'])

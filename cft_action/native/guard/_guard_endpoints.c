@@ -89,7 +89,7 @@ static void load_layer(void) {
   struct family *f = cft_family_ready(1);
   char path[4096];
   if (!CFT_FASTDDS3_PREFILTER) {
-    snprintf(why, sizeof why, "this build has %s", CFT_FASTDDS3_SOURCE);
+    snprintf(why, sizeof why, "not built (%s)", CFT_FASTDDS3_SOURCE);
   } else if (__atomic_load_n(&f->state, __ATOMIC_ACQUIRE) != CFT_GUARD_ACTIVE) {
     snprintf(why, sizeof why, "the guard does not lock this Fast DDS 3 (%.400s)", f->reason);
   } else if (dlopen(CFT_FASTDDS3_SONAME, RTLD_LAZY | RTLD_NOLOAD) == NULL) {
