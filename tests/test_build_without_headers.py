@@ -20,9 +20,7 @@ NATIVE = Path(__file__).resolve().parents[1] / 'cft_action' / 'native'
 HEADERLESS = '\n'.join([
     '#ifndef CFT_ACTION_FASTDDS_LAYOUT_H_', '#define CFT_ACTION_FASTDDS_LAYOUT_H_',
     '#define CFT_LAYOUT_KNOWN 0', '#define CFT_LAYOUT_SOURCE "no Fast DDS headers"',
-    '#define CFT_LAYOUT_INCLUDES ""', '#define CFT_FASTDDS3_PREFILTER 0',
-    '#define CFT_FASTDDS3_SONAME ""', '#define CFT_FASTDDS3_SOURCE "setup.py: no Fast DDS headers"',
-    '#endif', ''])
+    '#define CFT_LAYOUT_INCLUDES ""', '#endif', ''])
 
 
 @pytest.mark.parametrize('part', ['guard', 'reader'])

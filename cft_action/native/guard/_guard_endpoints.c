@@ -10,10 +10,10 @@
 // (_guard_replies.c decides), hands it to the layer of the loaded family:
 // - Fast DDS 3.3+: the service's response writer (rmw_fastrtps_cpp's public
 //   get_response_datawriter on rcl_service_get_rmw_handle's rmw handle) gets a sample prefilter
-//   from fastdds3/_prefilter.cpp, which asks _guard_replies.c's cft_reply_verdict for each reply and
-//   reader. That layer is a library of its own (_cftguard_fastdds3, next to this one), built against
-//   Fast DDS 3.3+ headers and linked against that Fast DDS; it is dlopened only where its soname
-//   (CFT_FASTDDS3_SONAME) is already loaded and the guard locks it (a Fast DDS 3 it knows);
+//   from fastdds3/_prefilter.cpp, which asks _guard_replies.c's cft_reply_verdict for each reply
+//   and reader. That layer is a library of its own (_cftguard_fastdds3, next to this one), built
+//   against Fast DDS 3.3+ headers and linked against that Fast DDS; it is dlopened only where its
+//   soname (CFT_FASTDDS3_SONAME) is already loaded and the guard locks it (a Fast DDS 3 it knows);
 // - Fast DDS 2.14 marks its reply writers itself, from the readers they match (_guard_replies.c),
 //   and nothing is done here.
 // Where the layer cannot be used (not built, another Fast DDS, another rmw), every reply goes to
@@ -35,6 +35,14 @@
 #include "_guard_log.h"
 #include "_guard_replies.h"
 #include "fastdds3/_prefilter.h"
+
+// setup.py's _fastdds_layout.h says whether the layer was built; a layout header written otherwise
+// (the tests' made-up layouts) does not, and has none.
+#ifndef CFT_FASTDDS3_PREFILTER
+#define CFT_FASTDDS3_PREFILTER 0
+#define CFT_FASTDDS3_SONAME ""
+#define CFT_FASTDDS3_SOURCE "a _fastdds_layout.h that setup.py did not write"
+#endif
 
 #define SERVICE_INIT "rcl_service_init"
 #define SERVICE_RMW_HANDLE "rcl_service_get_rmw_handle"
@@ -62,7 +70,7 @@ static void resolve_rcl(void) {
   rcl.name = (name_fn)cft_guard_loaded_symbol(SERVICE_NAME, "librcl");
 }
 
-// ---- the Fast DDS 3 layer ------------------------------------------------------------------------
+// ---- the Fast DDS 3 layer -----------------------------------------------------------------------
 static char layer_state[640] = "off: no action service created yet";
 static struct {
   cft_fastdds3_route_replies_fn route_replies;
@@ -93,7 +101,7 @@ static void load_layer(void) {
   } else if (__atomic_load_n(&f->state, __ATOMIC_ACQUIRE) != CFT_GUARD_ACTIVE) {
     snprintf(why, sizeof why, "the guard does not lock this Fast DDS 3 (%.400s)", f->reason);
   } else if (dlopen(CFT_FASTDDS3_SONAME, RTLD_LAZY | RTLD_NOLOAD) == NULL) {
-    snprintf(why, sizeof why, "the loaded Fast DDS is not %s, whose headers it was built with",
+    snprintf(why, sizeof why, "the loaded Fast DDS is not %s, the one the layer was built with",
              CFT_FASTDDS3_SONAME);
   } else if ((layer.response_writer = (handle_fn)cft_guard_loaded_symbol(
                   RESPONSE_WRITER, "rmw_fastrtps_cpp")) == NULL) {
@@ -113,7 +121,8 @@ static void load_layer(void) {
     snprintf(layer_state, sizeof layer_state, "off: %s", why);
     cft_say("the Fast DDS 3 layer is off: %s; replies go to every client", why);
   } else {
-    snprintf(layer_state, sizeof layer_state, "on: %.250s, built with %.300s", path, CFT_FASTDDS3_SOURCE);
+    snprintf(layer_state, sizeof layer_state, "on: %.250s, built with %.300s", path,
+             CFT_FASTDDS3_SOURCE);
   }
 }
 

@@ -187,7 +187,8 @@ void cft_replies_reader_matched(const void *writer, const void *reader_guid, con
   say_routed(topic);
 }
 
-int cft_reply_verdict(const uint8_t *related, int32_t high, uint32_t low, const uint8_t *reader_guid) {
+int cft_reply_verdict(const uint8_t *related, int32_t high, uint32_t low,
+                      const uint8_t *reader_guid) {
   static const uint8_t unknown[16];
   // Most changes (feedback, status, anything but replies and requests) have no related identity.
   if (reader_guid == NULL || memcmp(related, unknown, sizeof unknown) == 0) return -1;

@@ -25,7 +25,8 @@ int cft_replies_relevance(const void *change, const void *reader_guid);
 // the reader `reader_guid` (16 bytes): 0 when it is for another participant than the reader's; -1
 // when it goes as Fast DDS sends it (no identity, one that does not read as rmw writes it, or a
 // reader of the requesting participant). Counted.
-int cft_reply_verdict(const uint8_t *related, int32_t high, uint32_t low, const uint8_t *reader_guid);
+int cft_reply_verdict(const uint8_t *related, int32_t high, uint32_t low,
+                      const uint8_t *reader_guid);
 
 // Whether CFT_GUARD_REPLIES leaves the reply filter on (not "off" or "0").
 bool cft_replies_wanted(void);
