@@ -197,10 +197,10 @@ def layout() -> str:
 def prefilter() -> str:
     """Return the state of the guard's Fast DDS 3 layer, which routes an action's replies with the
     writers' public sample prefilter (Fast DDS 3.3+, Lyrical): ``'on: <its library>, built with
-    <headers>'``, or ``'off: <why>'`` (not built against Fast DDS 3.3+ headers, another Fast DDS
-    loaded, another rmw, or no action service created yet). Decided at the first action service of a
-    process of Fast DDS 3, and said once on stderr when off. An empty string when the guard is not
-    preloaded.
+    <headers>'``, or ``'off: <why>'`` (``CFT_GUARD_REPLIES`` off, not built against Fast DDS 3.3+
+    headers, another Fast DDS loaded, another rmw, or no action service created yet). Decided at
+    the first action service of a process of Fast DDS 3, and said once on stderr when off. An
+    empty string when the guard is not preloaded.
     """
     process = _preloaded()
     if process is None:

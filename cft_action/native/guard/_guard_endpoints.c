@@ -161,4 +161,6 @@ int32_t rcl_service_init(void *service, const void *node, const void *type_suppo
 
 // ---- the C API, for ctypes -----------------------------------------------------------------------------
 // The Fast DDS 3 layer's state: "on: ..." or "off: <why>".
-CFT_EXPORT const char *cft_guard_prefilter_state(void) { return layer_state; }
+CFT_EXPORT const char *cft_guard_prefilter_state(void) {
+  return cft_replies_wanted() ? layer_state : "off: CFT_GUARD_REPLIES is off";
+}
