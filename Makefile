@@ -47,8 +47,9 @@ test: $(STAMP)
 KILTED_VENV ?= .venv-kilted
 KILTED_PYTHON ?= python3.12
 KILTED_TREE := build/kilted-tree
-KILTED_TESTS ?= tests/test_fastdds3.py tests/test_build_without_headers.py \
-    tests/test_rclpy_contract.py tests/test_errors.py tests/test_sql.py tests/test_filters.py
+KILTED_TESTS ?= tests/test_fastdds3.py tests/test_fastdds3_replies.py \
+    tests/test_build_without_headers.py tests/test_rclpy_contract.py tests/test_errors.py \
+    tests/test_sql.py tests/test_filters.py
 # The wheels, by a first install (not in place; its build is replaced by the tree's below).
 $(KILTED_VENV)/.installed: pyproject.toml
 	$(MAKE) --no-print-directory $(KILTED_VENV)/bin/python PYTHON=$(KILTED_PYTHON) VENV=$(KILTED_VENV)
@@ -62,10 +63,16 @@ define copy-tree
 	git ls-files -z --cached --others --exclude-standard | xargs -0 cp --parents -t $(1)
 endef
 
+# $(1): a copy of this tree, the package built in it for KILTED_VENV against the Fast DDS headers
+# in $(2) (CFT_FASTDDS_INCLUDE; empty: those setup.py finds, the wheels').
+define kilted-build
+	$(call copy-tree,$(1))
+	cd $(1) && CFT_FASTDDS_INCLUDE=$(2) $(CURDIR)/$(KILTED_VENV)/bin/python -m pip install \
+	    --quiet --disable-pip-version-check --no-deps -e .
+endef
+
 kilted-tree: $(KILTED_VENV)/.installed
-	$(call copy-tree,$(KILTED_TREE))
-	cd $(KILTED_TREE) && $(CURDIR)/$(KILTED_VENV)/bin/python -m pip install --quiet \
-	    --disable-pip-version-check --no-deps -e .
+	$(call kilted-build,$(KILTED_TREE),)
 
 test-kilted: kilted-tree
 	cd $(KILTED_TREE) && $(CURDIR)/$(KILTED_VENV)/bin/python -m pytest $(KILTED_TESTS)
@@ -124,12 +131,17 @@ COMPAT_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_uuid_c
 compat: $(STAMP)
 	compat/run.sh $(VENV) $(COMPAT_CACHE) "$(COMPAT_STACKS)" $(COMPAT_TESTS)
 
-# The same on Fast DDS 3 stacks under Kilted's wheels (KILTED_VENV, the package in KILTED_TREE as
-# for test-kilted): Lyrical's Fast DDS 3.6.2 with its rmw_fastrtps, `wheels` for Kilted's own 3.2.2.
+# The same on Fast DDS 3 stacks under Kilted's wheels (KILTED_VENV): Lyrical's Fast DDS 3.6.2 with its rmw_fastrtps, `wheels` for Kilted's own 3.2.2.
+# The package is built in a copy of its own (KILTED_COMPAT_TREE) against the first stack's Fast DDS
+# headers, as a user of that stack builds it (Lyrical's 3.6.2: the guard's Fast DDS 3 layer,
+# native/guard/fastdds3/, is built and linked against it); the wheels' 3.2.2 where it has none.
 KILTED_COMPAT_STACKS ?= lyrical-3.6.2
 KILTED_COMPAT_TESTS ?= $(KILTED_TESTS)
-compat-kilted: kilted-tree
-	cd $(KILTED_TREE) && compat/run.sh $(CURDIR)/$(KILTED_VENV) $(COMPAT_CACHE) \
+KILTED_COMPAT_TREE := build/kilted-compat-tree
+KILTED_COMPAT_HEADERS ?= $(wildcard $(COMPAT_CACHE)/$(firstword $(KILTED_COMPAT_STACKS))/install/include)
+compat-kilted: $(KILTED_VENV)/.installed
+	$(call kilted-build,$(KILTED_COMPAT_TREE),$(KILTED_COMPAT_HEADERS))
+	cd $(KILTED_COMPAT_TREE) && compat/run.sh $(CURDIR)/$(KILTED_VENV) $(COMPAT_CACHE) \
 	    "$(KILTED_COMPAT_STACKS)" $(KILTED_COMPAT_TESTS)
 
 # libFuzzer over every C entry point that parses another participant's bytes (fuzz/README.md):

@@ -7,7 +7,11 @@ Their sources are in ``cft_action/native/``, by the process they run in:
   ``_guard.c`` (the locks and the interposed Fast DDS members), ``_guard_families.c`` (which Fast
   DDS is loaded and where its real members are), ``_guard_filter.c`` (the DDS-SQL accelerator),
   ``_guard_writer_qos.c`` (the writers' filtered-reader limit and mark), ``_guard_heartbeats.c``,
-  ``_guard_replies.c``, ``_guard_status.c`` and ``_guard_log.c``;
+  ``_guard_replies.c``, ``_guard_status.c``, ``_guard_endpoints.c`` and ``_guard_log.c``;
+- ``native/guard/fastdds3/`` builds ``_cftguard_fastdds3``, the guard's Fast DDS 3.3+ layer (C++,
+  public API: the writers' sample prefilter), only where Fast DDS 3.3+ headers and their library are
+  found; it is linked against that Fast DDS, and the guard loads it only into a process that has it
+  loaded;
 - ``native/reader/`` builds ``_cftreader``, loaded with ctypes by ``cft_action._rcl`` into every
   process that changes a filter or takes an action client's status: the reader lock, the reader's
   filter class, the writer marks, the PLT patcher, the status trim and the response filter;
@@ -33,6 +37,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import Optional
 
 from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
@@ -41,39 +46,62 @@ PROBE = 'cft_action/native/_fastdds_layout.cpp'
 LAYOUT_HEADER = '_fastdds_layout.h'
 
 
-def fastdds_include_dirs() -> tuple[list[Path], str]:
-    """The include directories of the Fast DDS 2.14 headers to build against, and what was found.
-
-    The directories are [] where there are none, and also where the first Fast DDS headers found are
-    Fast DDS 3's (``fastdds/config.hpp``: Kilted's wheels, Lyrical): that stack's Fast DDS is 3.x,
-    and the 2.14 headers that pip's isolated build environment brings (``[build-system] requires``)
-    are not the library that will be loaded. The text says which headers were found, for the layout
-    header's source.
-
-    The first directory that holds ``fastrtps/config.h`` wins, searched in this order:
-    ``CFT_FASTDDS_INCLUDE`` (directories separated by ``os.pathsep``); this Python's prefix (the
-    ROS wheels, a colcon underlay); each ``AMENT_PREFIX_PATH`` entry (apt's ``/opt/ros/jazzy``,
-    whose Fast DDS headers are under ``include/fastrtps``); the prefixes of ``sys.path`` (pip's
-    isolated build environment, which gets the wheels' headers from ``[build-system] requires``).
-    """
+def header_candidates() -> list[Path]:
+    """The directories searched for Fast DDS headers, in order (:func:`fastdds_include_dirs`)."""
     explicit = [Path(p) for p in os.environ.get('CFT_FASTDDS_INCLUDE', '').split(os.pathsep) if p]
-    # An explicit directory may also be one above the headers' own, as a prefix's include/ is.
-    candidates = [d for p in explicit for d in (p, p / 'fastrtps')]
-    if explicit and not any((d / 'fastrtps' / 'config.h').is_file() for d in candidates):
+    # An explicit directory may also be one above the headers' own, as a prefix's include/ is (and
+    # Fast DDS 3 installs under include/fastdds/ with APPEND_PROJECT_NAME_TO_INCLUDEDIR, as
+    # Lyrical's packages do).
+    candidates = [d for p in explicit for d in (p, p / 'fastrtps', p / 'fastdds')]
+    if explicit and not any((d / 'fastrtps' / 'config.h').is_file()
+                            or (d / 'fastdds' / 'config.hpp').is_file() for d in candidates):
         # Building from other headers than the ones named would be a silent substitution.
         raise SystemExit(f'setup.py: CFT_FASTDDS_INCLUDE={os.environ["CFT_FASTDDS_INCLUDE"]} has '
-                         'no fastrtps/config.h in any of its directories or their fastrtps/')
+                         'no fastrtps/config.h or fastdds/config.hpp in any of its directories or '
+                         'their fastrtps/ or fastdds/')
     prefixes = [Path(sys.prefix)]
     prefixes += [Path(p) for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
     prefixes += [Path(p).parents[2] for p in sys.path if p.endswith('site-packages')]
     for prefix in prefixes:
-        candidates += [prefix / 'include', prefix / 'include' / 'fastrtps']
+        candidates += [prefix / 'include', prefix / 'include' / 'fastrtps',
+                       prefix / 'include' / 'fastdds']
+    return candidates
+
+
+#: The first Fast DDS 3 release whose DataWriter has set_sample_prefilter (fastdds3/_prefilter.cpp).
+PREFILTER_SINCE = (3, 3)
+
+
+def fastdds_include_dirs() -> tuple[list[Path], str, list[Path], tuple[int, int]]:
+    """The include directories of the Fast DDS 2.14 headers to build against, what was found, those
+    of Fast DDS 3.3+ headers for the guard's Fast DDS 3 layer (native/guard/fastdds3/), and the
+    found headers' major and minor version.
+
+    The first Fast DDS headers found decide: Fast DDS 2.14's (``fastrtps/config.h``) give the first
+    list, Fast DDS 3's (``fastdds/config.hpp``: Kilted's wheels, Lyrical) give none there, since
+    that stack's Fast DDS is 3.x and the 2.14 headers that pip's isolated build environment brings
+    (``[build-system] requires``) are not the library that will be loaded; from 3.3 on they give the
+    third list. The text says which headers were found, for the layout header's source.
+
+    Searched in this order: ``CFT_FASTDDS_INCLUDE`` (directories separated by ``os.pathsep``);
+    this Python's prefix (the ROS wheels, a colcon underlay); each ``AMENT_PREFIX_PATH`` entry
+    (apt's ``/opt/ros/jazzy``, whose Fast DDS headers are under ``include/fastrtps``); the prefixes
+    of ``sys.path`` (pip's isolated build environment, which gets the wheels' headers from
+    ``[build-system] requires``).
+    """
+    candidates = header_candidates()
     for include in candidates:
         if (include / 'fastdds' / 'config.hpp').is_file():
-            version = re.search(r'FASTDDS_VERSION_STR "([^"]+)"',
-                                (include / 'fastdds' / 'config.hpp').read_text(errors='replace'))
-            return [], (f'the headers of Fast DDS {version.group(1) if version else "3"} in '
-                        f'{include}, which has no Fast DDS 2.14 layout')
+            text = (include / 'fastdds' / 'config.hpp').read_text(errors='replace')
+            version = re.search(r'FASTDDS_VERSION_STR "([^"]+)"', text)
+            numbers = tuple(int(m.group(1)) if m else 0 for m in (
+                re.search(rf'FASTDDS_VERSION_{part} (\d+)', text) for part in ('MAJOR', 'MINOR')))
+            found = (f'the headers of Fast DDS {version.group(1) if version else "3"} in '
+                     f'{include}, which has no Fast DDS 2.14 layout')
+            # fastcdr: beside it (wheels), or in its own folder next to fastdds/ (Lyrical's).
+            near = [include.parent / 'fastcdr'] if include.name == 'fastdds' else []
+            three = [include] + [d for d in near if d.is_dir()]
+            return [], found, three if numbers >= PREFILTER_SINCE else [], numbers
         if (include / 'fastrtps' / 'config.h').is_file():
             # fastcdr and foonathan_memory: beside it (wheels), in their own folders (apt), or in a
             # later candidate (CFT_FASTDDS_INCLUDE=<stack headers>:<venv>/include).
@@ -82,8 +110,8 @@ def fastdds_include_dirs() -> tuple[list[Path], str]:
             near = [root / 'fastcdr', root / 'foonathan_memory', root / 'rmw', root / 'rcutils',
                     root]
             return (list(dict.fromkeys([include] + [d for d in near + candidates if d.is_dir()])),
-                    f'Fast DDS headers in {include}')
-    return [], 'no Fast DDS headers were found at build time'
+                    f'Fast DDS headers in {include}', [], (2, 14))
+    return [], 'no Fast DDS headers were found at build time', [], (0, 0)
 
 
 def c_string(text: str) -> str:
@@ -91,10 +119,10 @@ def c_string(text: str) -> str:
     return '"' + text.replace('\\', '\\\\').replace('"', '\\"') + '"'
 
 
-def layout_header(build_temp: Path) -> str:
-    """Write ``_fastdds_layout.h`` into ``build_temp`` and return what it was made from."""
+def layout_header(build_temp: Path) -> None:
+    """Write ``_fastdds_layout.h`` into ``build_temp``."""
     build_temp.mkdir(parents=True, exist_ok=True)
-    includes, found = fastdds_include_dirs()
+    includes, found, three, version = fastdds_include_dirs()
     compiler = os.environ.get('CXX') or shutil.which('c++') or shutil.which('g++')
     lines: list[str] = []
     source = ''
@@ -127,10 +155,36 @@ def layout_header(build_temp: Path) -> str:
     # The include path itself, so that tests can compile their probes against the same headers.
     out.append('#define CFT_LAYOUT_INCLUDES '
                + c_string(os.pathsep.join(str(d) for d in includes) if values else ''))
+    # The guard's Fast DDS 3 layer (native/guard/fastdds3/), built on Fast DDS 3.3+ (layer_library).
+    layer = layer_library(three)
+    out.append(f'#define CFT_FASTDDS3_PREFILTER {1 if layer else 0}')
+    out.append('#define CFT_FASTDDS3_SONAME '
+               + c_string(f'libfastdds.so.{version[0]}.{version[1]}' if layer else ''))
+    # Where the layer came from, or (a clause after "not built: ") why it was not built.
+    needs = (f'it needs Fast DDS {".".join(map(str, PREFILTER_SINCE))}+ headers (with '
+             'DataWriter::set_sample_prefilter) and their libfastdds.so')
+    out.append('#define CFT_FASTDDS3_SOURCE ' + c_string(
+        f'the headers and library of Fast DDS {version[0]}.{version[1]} in {three[0]}' if layer
+        else f'setup.py: the headers of Fast DDS 3 in {three[0]}, but no libfastdds.so beside '
+             f'them; {needs}' if three
+        else f'setup.py: {found}; {needs}'))
     out.append('#endif  // CFT_ACTION_FASTDDS_LAYOUT_H_')
     (build_temp / LAYOUT_HEADER).write_text('\n'.join(out) + '\n')
-    print(f'setup.py: Fast DDS layout from {source}', file=sys.stderr)
-    return source
+    print(f'setup.py: Fast DDS layout from {source}; the guard\'s Fast DDS 3 layer '
+          f'{"from " + str(layer) if layer else "off"}', file=sys.stderr)
+
+
+def layer_library(three: list[Path]) -> Optional[Path]:
+    """The directory of the libfastdds.so to link the guard's Fast DDS 3 layer against: the lib/
+    of the prefix of the Fast DDS 3.3+ headers ``three`` (``<prefix>/include`` or
+    ``<prefix>/include/fastdds``); None without such headers or library."""
+    if not three:
+        return None
+    prefix = three[0].parent.parent if three[0].name == 'fastdds' else three[0].parent
+    for lib in (prefix / 'lib', prefix / 'lib' / 'x86_64-linux-gnu', prefix / 'lib64'):
+        if (lib / 'libfastdds.so').exists():
+            return lib
+    return None
 
 
 class BuildWithLayout(build_ext):
@@ -148,9 +202,9 @@ class BuildWithLayout(build_ext):
 NATIVE = Path('cft_action/native')
 
 
-def sources(*folders: Path) -> list[str]:
-    """The C sources directly in ``folders``, sorted, as paths relative to this file."""
-    return sorted(str(c) for folder in folders for c in folder.glob('*.c'))
+def sources(*folders: Path, pattern: str = '*.c') -> list[str]:
+    """The sources matching ``pattern`` directly in ``folders``, sorted, relative to this file."""
+    return sorted(str(c) for folder in folders for c in folder.glob(pattern))
 
 
 def native_extension(name: str, own: Path, **options) -> Extension:
@@ -158,6 +212,23 @@ def native_extension(name: str, own: Path, **options) -> Extension:
     return Extension(f'cft_action.{name}', sources=sources(own, NATIVE),
                      include_dirs=[str(own), str(NATIVE)], libraries=['dl', 'pthread'],
                      depends=sorted(str(h) for h in NATIVE.rglob('*.h')), **options)
+
+
+def fastdds3_layer() -> list[Extension]:
+    """The guard's Fast DDS 3 layer (native/guard/fastdds3/, C++), where Fast DDS 3.3+ headers and
+    their library are found: a library of its own, linked against that Fast DDS, which the guard
+    loads only into a process that has it loaded (native/guard/_guard_endpoints.c). None elsewhere
+    (the guard then says once why the layer is off)."""
+    three = fastdds_include_dirs()[2]
+    lib = layer_library(three)
+    if lib is None:
+        return []
+    layer = NATIVE / 'guard' / 'fastdds3'
+    return [Extension('cft_action._cftguard_fastdds3', sources=sources(layer, pattern='*.cpp'),
+                      include_dirs=[str(layer), *map(str, three)], library_dirs=[str(lib)],
+                      libraries=['fastdds'], language='c++',
+                      depends=sources(layer, pattern='*.h'),
+                      extra_compile_args=['-O2', '-std=c++17', '-fvisibility=hidden', '-Wall'])]
 
 
 setup(
@@ -170,5 +241,5 @@ setup(
             '-O2', '-fvisibility=hidden', '-fexceptions', '-Wall']),
         native_extension('_cftreader', NATIVE / 'reader',
                          extra_compile_args=['-O2', '-fvisibility=hidden', '-Wall']),
-    ],
+    ] + fastdds3_layer(),
 )

@@ -14,7 +14,10 @@ GUARD_LIBRARY = '_cftguard'
 #: The reader lock, ``_reader_lock.c``, and the status trim, ``_status_trim.c``: loaded with ctypes
 #: into processes that change filters or take an action client's status.
 READER_LOCK_LIBRARY = '_cftreader'
-LIBRARIES = (GUARD_LIBRARY, READER_LOCK_LIBRARY)
+#: The guard's Fast DDS 3 layer (native/guard/fastdds3/), built only against Fast DDS 3.3+ headers
+#: and dlopened by the guard, never by Python.
+GUARD_FASTDDS3_LIBRARY = '_cftguard_fastdds3'
+LIBRARIES = (GUARD_LIBRARY, READER_LOCK_LIBRARY, GUARD_FASTDDS3_LIBRARY)
 
 
 def extension_path(module: str) -> Optional[str]:

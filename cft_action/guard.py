@@ -19,10 +19,12 @@ or, from Python, ``subprocess.Popen(cmd, env=cft_action.guard.environment())``.
 Where it knows the Fast DDS, it also sends each of an action's goal, cancel and result replies only
 to the response readers of the participant that sent the request (the others' take would discard
 it): see :func:`reply_counts`; ``CFT_GUARD_REPLIES=off`` sends every reply to every client, as
-rmw_fastrtps does.
+rmw_fastrtps does. On Fast DDS 3.3+ (Lyrical) it does so through the writers' public sample
+prefilter, where the package was built against those headers: see :func:`prefilter`.
 
-It only locks on a Fast DDS it knows (``libfastrtps.so.2.14``, ``libfastdds.so.3.2``). On any other
-version it calls straight through and prints one line on stderr saying that it is inactive and why.
+It only locks on a Fast DDS it knows (``libfastrtps.so.2.14``, ``libfastdds.so.3.6``,
+``libfastdds.so.3.2``). On any other version it calls straight through and prints one line on
+stderr saying that it is inactive and why.
 Set ``CFT_GUARD_DEBUG=1`` to see what it does.
 """
 
@@ -37,8 +39,8 @@ from cft_action._native import extension_path, GUARD_LIBRARY
 from cft_action.errors import CftActionError
 
 __all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts',
-           'filter_counts', 'layout', 'writer_limits', 'reply_counts', 'status_counts',
-           'environment', 'READER_FILTERS_ENV', 'REPLIES_ENV', 'STATUS_ENV']
+           'filter_counts', 'layout', 'prefilter', 'writer_limits', 'reply_counts',
+           'status_counts', 'environment', 'READER_FILTERS_ENV', 'REPLIES_ENV', 'STATUS_ENV']
 
 #: Environment variable with the number of filtered readers that each writer of a guarded process
 #: filters for (1 to 4063; default 1024; Fast DDS's own limit is 32).
@@ -190,6 +192,23 @@ def layout() -> str:
     if process is None:
         return ''
     return process.cft_guard_filter_layout_report().decode('utf-8', 'replace')
+
+
+def prefilter() -> str:
+    """Return the state of the guard's Fast DDS 3 layer, which routes an action's replies with the
+    writers' public sample prefilter (Fast DDS 3.3+, Lyrical): ``'on: <its library>, built with
+    <headers>'``, or ``'off: <why>'`` (``CFT_GUARD_REPLIES`` off, not built against Fast DDS 3.3+
+    headers, another Fast DDS loaded, another rmw, or no action service created yet). Decided at
+    the first action service of a process of Fast DDS 3, and said once on stderr when off. An
+    empty string when the guard is not preloaded.
+    """
+    process = _preloaded()
+    if process is None:
+        return ''
+    state = process.cft_guard_prefilter_state
+    state.argtypes = []
+    state.restype = ctypes.c_char_p
+    return state().decode('utf-8', 'replace')
 
 
 #: The counters of cft_guard_filter_class_count() in _guard.c, in its order.

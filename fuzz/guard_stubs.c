@@ -29,3 +29,8 @@ void *cft_guard_real(void **cache, const char *soname, const char *name) {
   (void)cache, (void)soname, (void)name;
   return NULL;
 }
+
+void *cft_guard_loaded_symbol(const char *name, const char *prefer) {
+  (void)name, (void)prefer;
+  return NULL;
+}

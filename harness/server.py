@@ -47,8 +47,9 @@ warns of while the goal runs),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
 line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and ``guard_filter_class`` (its call,
-filter-verdict, writer-limit and filter-class counters), ``guard_replies`` (its reply filter's)
-and ``writers`` (the GUIDs of the feedback and status writers, and of the ``send_goal``,
+filter-verdict, writer-limit and filter-class counters), ``guard_replies`` (its reply filter's),
+``guard_prefilter`` (its Fast DDS 3 layer's state, :func:`cft_action.guard.prefilter`) and
+``writers`` (the GUIDs of the feedback and status writers, and of the ``send_goal``,
 ``cancel_goal`` and ``get_result`` reply writers, in hex).
 ``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
 by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). ``READERS <json>``
@@ -387,6 +388,7 @@ class TickingServer:
                     'guard_filter_class': guard.filter_class_counts(),
                     'guard_heartbeats': guard.heartbeat_counts(),
                     'guard_replies': guard.reply_counts(),
+                    'guard_prefilter': guard.prefilter(),
                     'guard_status': guard.status_counts()}
 
 

@@ -8,7 +8,8 @@
   use them, once, and is plain rclpy (every goal's feedback whole, ``filtered_in == 'none'``).
 - Under the guard, a DDS-SQL client (``writer_filtering='any'``) is filtered by the server's
   writer: each filtered client's port receives exactly its own goals' feedback DATA, a plain one
-  every goal's.
+  every goal's. The guard's Fast DDS 3 layer (tests/test_fastdds3_replies.py) is on where it is
+  built for the stack, else off and says why (Kilted's 3.2.2 has no sample prefilter).
 - Fast-DDS#4878 on 3.2: a guarded server and a client that changes its DDS-SQL filter 1,000 times at
   a 0.5 ms feedback period both survive (the guard locks the writer's filter changes against its
   writes; the reader lock serializes the client's own evaluations with the changes). Unguarded, the
@@ -31,6 +32,7 @@ from harness.capture import data_by_port
 from harness.ros import unique_name
 from tests.support import feedback_on_the_wire
 from tests.test_action_client import run_clients, start_server
+from tests.test_fastdds3_replies import MISSING as LAYER_MISSING
 from tests.test_guard import hazard_cell
 
 
@@ -71,6 +73,9 @@ def test_a_guarded_server_filters_dds_sql_feedback_in_its_writer() -> None:
     every = GOALS * ORDER * len(run.reports)
     assert sorted(len(samples) for samples in run.captured.values()) == (
         [GOALS * ORDER] * 2 + [every]), {p: len(s) for p, s in run.captured.items()}
+    # The guard's Fast DDS 3 layer (replies): on where built for this stack, else off, and why.
+    state = run.stats_after['guard_prefilter']
+    assert state.startswith('on: ' if LAYER_MISSING is None else 'off: '), (state, LAYER_MISSING)
 
 
 def test_the_guarded_server_and_a_churning_dds_sql_client_survive_1000_updates(

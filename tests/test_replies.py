@@ -67,6 +67,27 @@ def results_per_port(run: WireRun) -> dict[int, int]:
             for port, seen in ports(run).items()}
 
 
+def assert_each_port_received_only_its_own(run: WireRun,
+                                           clients: Sequence[tuple[str, int]]) -> None:
+    """No reply reached two participants, each client's port received its own goals' results and,
+    in bytes, about no more, no reply DATA carried a filter signature, and the guard routed the
+    action's three reply writers, withholding some replies and finding every identity plausible."""
+    samples = [set(seen.samples) for seen in ports(run).values()]
+    assert len(samples) == len(clients), ports(run).keys()
+    assert len(set().union(*samples)) == sum(map(len, samples)), 'a reply reached two clients'
+    per_port = results_per_port(run)
+    assert sorted(per_port.values()) == sorted(goals for _, goals in clients), per_port
+    for port, seen in ports(run).items():
+        # Besides its results, a port gets its goal replies, GAPs and heartbeats (a few kB), and
+        # repairs of its own samples after a loss, which are not counted here.
+        own, got = per_port[port] * RESULT_BYTES, seen.octets - seen.resent_octets
+        assert own <= got < own + RESULT_BYTES // 4, (port, seen, own)
+        assert set(seen.samples.values()) == {None}, 'a reply carried a filter signature'
+    replies = run.stats_after['guard_replies']
+    assert replies['marked'] == len(REPLY_WRITERS) and replies['withheld'] > 0, replies
+    assert replies['implausible'] == replies['full'] == 0, replies
+
+
 def test_each_client_receives_only_its_own_replies() -> None:
     """Under the guard: no reply reaches two participants, each client's results are its own
     goals', in bytes too, no reply DATA carries a filter signature, the library's clients drop no
@@ -77,20 +98,7 @@ def test_each_client_receives_only_its_own_replies() -> None:
     for (mode, _), report in zip(CLIENTS, run.reports):
         if mode != 'rclpy':
             assert report['responses_dropped'] == 0 < report['responses_passed'], (mode, report)
-    samples = [set(seen.samples) for seen in ports(run).values()]
-    assert len(samples) == len(CLIENTS), ports(run).keys()
-    assert len(set().union(*samples)) == sum(map(len, samples)), 'a reply reached two clients'
-    per_port = results_per_port(run)
-    assert sorted(per_port.values()) == sorted(goals for _, goals in CLIENTS), per_port
-    for port, seen in ports(run).items():
-        # Besides its results, a port gets its goal replies, GAPs and heartbeats (a few kB), and
-        # repairs of its own samples after a loss, which are not counted here.
-        own, got = per_port[port] * RESULT_BYTES, seen.octets - seen.resent_octets
-        assert own <= got < own + RESULT_BYTES // 4, (port, seen, own)
-        assert set(seen.samples.values()) == {None}, 'a reply carried a filter signature'
-    replies = run.stats_after['guard_replies']
-    assert replies['marked'] == len(REPLY_WRITERS) and replies['withheld'] > 0, replies
-    assert replies['implausible'] == replies['full'] == 0, replies
+    assert_each_port_received_only_its_own(run, CLIENTS)
 
 
 def test_an_unguarded_server_sends_every_reply_to_every_client() -> None:

@@ -217,6 +217,45 @@ void *cft_guard_real(void **cache, const char *soname, const char *name) {
   return p;
 }
 
+// Every loaded object's path, collected by dl_iterate_phdr (which holds the loader's lock, so that
+// dlopen comes after it).
+#define MAX_OBJECTS 512
+struct objects {
+  int count;
+  char *names[MAX_OBJECTS];
+};
+
+static int collect_object(struct dl_phdr_info *info, size_t size, void *data) {
+  (void)size;
+  struct objects *o = data;
+  if (info->dlpi_name != NULL && info->dlpi_name[0] != '\0' && o->count < MAX_OBJECTS) {
+    char *name = strdup(info->dlpi_name);
+    if (name != NULL) o->names[o->count++] = name;
+  }
+  return 0;
+}
+
+void *cft_guard_loaded_symbol(const char *name, const char *prefer) {
+  struct objects o = {0};
+  dl_iterate_phdr(collect_object, &o);
+  void *found = NULL;
+  bool preferred = false;
+  for (int i = 0; i < o.count; i++) {
+    void *handle = dlopen(o.names[i], RTLD_LAZY | RTLD_NOLOAD);
+    void *p = handle != NULL ? dlsym(handle, name) : NULL;
+    Dl_info where;
+    // Defined in this object itself, not found through its dependencies, and not the guard's.
+    if (p != NULL && !ours(p) && dladdr(p, &where) != 0 && where.dli_fname != NULL &&
+        strcmp(where.dli_fname, o.names[i]) == 0) {
+      bool better = prefer != NULL && strstr(o.names[i], prefer) != NULL;
+      if (found == NULL || (better && !preferred)) found = p, preferred = better;
+    }
+    // The handle stays open: the object is loaded anyway, and `found` must not outlive it.
+    free(o.names[i]);
+  }
+  return found;
+}
+
 int cft_guard_knows_fastdds2(void) {
   // A process with a Fast DDS 3 loaded has no 2.14 to come: no probe at every writer's creation.
   if (cft_loaded_family() != 0) return 0;

@@ -7,11 +7,14 @@
 // _guard_filter.c (the DDS-SQL accelerator), _guard_writer_qos.c (the writers' limit of filtered
 // readers), _guard_heartbeats.c (which readers a filtered writer's HEARTBEATs and GAPs reach),
 // _guard_replies.c (an action's replies go to the requesting participant), _guard_status.c (the
-// status filter), _guard_log.c (logging) and the filter classes (_filter_class.c,
-// _uuid_program.c, _node_program.c, _rate_program.c); setup.py builds them into one library.
+// status filter), _guard_endpoints.c (rcl's services, handed to the loaded family's layer),
+// _guard_log.c (logging) and the filter classes (_filter_class.c, _uuid_program.c,
+// _node_program.c, _rate_program.c); setup.py builds them into one library. The Fast DDS 3.3+
+// layer, fastdds3/ (C++, public API only), is a library of its own that _guard_endpoints.c loads.
 // Calls go one way: _guard.c -> _guard_replies.c -> _guard_filter.c -> _guard_status.c and
-// _filter_class.c; _guard_writer_qos.c and _guard_heartbeats.c -> _guard_status.c; every part ->
-// _guard_families.c -> _guard_log.c.
+// _filter_class.c; _guard_endpoints.c -> _guard_replies.c and fastdds3/ (which calls back only the
+// decision it is given); _guard_writer_qos.c and _guard_heartbeats.c -> _guard_status.c; every
+// part -> _guard_families.c -> _guard_log.c.
 #ifndef CFT_ACTION_GUARD_FAMILIES_H_
 #define CFT_ACTION_GUARD_FAMILIES_H_
 
@@ -109,5 +112,11 @@ long cft_guard_env_ms(long *cache, const char *env, long fallback_ms, long min_m
 // there is none. Cached in *cache (release) on the first call; the library's handle is kept, since
 // the pointer must not outlive it.
 void *cft_guard_real(void **cache, const char *soname, const char *name);
+
+// The definition of `name` in a loaded object other than the guard, one whose path holds `prefer`
+// if there is one (NULL: the first found); NULL if none. For the libraries that ROS loads in a local
+// scope, outside the global one that RTLD_NEXT searches (rcl, rmw_implementation, which the wheels
+// rename, rmw_fastrtps_cpp). Not under the loader's lock: call it outside Fast DDS's callbacks.
+void *cft_guard_loaded_symbol(const char *name, const char *prefer);
 
 #endif  // CFT_ACTION_GUARD_FAMILIES_H_

@@ -35,8 +35,14 @@
 // own writerGUID: GUIDs are not reused, so a mark never applies to another writer. Requests this
 // process writes carry an identity too (rmw's `rq/` writers), but their writers are never marked.
 //
+// Fast DDS 3.3+ (Lyrical) asks the same decision, cft_reply_verdict, through public API:
+// _guard_endpoints.c gives an action's response writers, when rcl creates their services, the
+// sample prefilter of fastdds3/_prefilter.cpp, which Fast DDS asks per reply and reader with the
+// change's related sample identity (every reader, without marks, CacheChange_t or reader data).
+//
 // Soundness rules:
-// - Only where _guard.c locks the Fast DDS 2.14 it knows, with a layout from its headers.
+// - Fast DDS 2.14: only where _guard.c locks the Fast DDS 2.14 it knows, with a layout from its
+//   headers. Fast DDS 3: only with the layer's conditions (_guard_endpoints.c).
 // - Only ALIVE changes, and only an identity that reads as rmw writes it: a user entity (writer
 //   kind 0x02/0x03, reader kind 0x04/0x07) and a positive sequence number; anything else is
 //   counted (`implausible`) and sent as Fast DDS sends it.
@@ -44,7 +50,7 @@
 // - A data-sharing reader is judged like any other. rmw_fastrtps turns data sharing off for its
 //   service writers unless its XML QoS is used (leave_middleware_default_qos); that case is not
 //   tested.
-// - CFT_GUARD_REPLIES=off (or 0) turns this file off.
+// - CFT_GUARD_REPLIES=off (or 0) turns this file off, on both families.
 
 #define _GNU_SOURCE
 #include <pthread.h>
@@ -62,28 +68,57 @@
 #define FASTDDS2_SONAME "libfastrtps.so.2.14"
 #define WRITER_GUID_NAME "_ZNK8eprosima7fastdds3dds14DataWriterImpl4guidEv"
 
+// An action's services, by the end of their ROS name; rmw_fastrtps's reply topic is
+// "rr" + that name + "Reply".
 #define REPLY_PREFIX "rr/"
-static const char *const reply_suffixes[] = {"/_action/send_goalReply", "/_action/cancel_goalReply",
-                                             "/_action/get_resultReply"};
+#define REPLY_SUFFIX "Reply"
+static const char *const action_services[] = {"/_action/send_goal", "/_action/cancel_goal",
+                                              "/_action/get_result"};
 
 enum { MARKED = 0, WITHHELD = 1, PASSED = 2, IMPLAUSIBLE = 3, FULL = 4, COUNTERS = 5 };
 static unsigned long counters[COUNTERS];
 static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_RELAXED); }
 
-// CFT_GUARD_REPLIES: on unless "off" or "0", and only where the guard knows the Fast DDS.
+// CFT_GUARD_REPLIES: on unless "off" or "0", and only where the guard knows the Fast DDS 2.14.
 static bool replies_on(void) {
   static int on = -1;  // -1: not read yet
   return cft_guard_part_on(&on, "CFT_GUARD_REPLIES", CFT_LAYOUT_KNOWN);
 }
 
-static bool is_action_reply_topic(const char *topic) {
-  size_t n = strlen(topic);
-  if (strncmp(topic, REPLY_PREFIX, strlen(REPLY_PREFIX)) != 0) return false;
-  for (size_t i = 0; i < sizeof reply_suffixes / sizeof reply_suffixes[0]; i++) {
-    size_t m = strlen(reply_suffixes[i]);
-    if (n > m + strlen(REPLY_PREFIX) && strcmp(topic + n - m, reply_suffixes[i]) == 0) return true;
+bool cft_replies_wanted(void) {
+  const char *text = getenv("CFT_GUARD_REPLIES");
+  return !(text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0));
+}
+
+// Whether `name` ends in one of an action's service names, after at least one character, and then
+// in `tail` (a ROS service name: ""; rmw_fastrtps's reply topic: "Reply").
+static bool is_action_service(const char *name, const char *tail) {
+  size_t n = strlen(name), t = strlen(tail);
+  if (n < t || strcmp(name + n - t, tail) != 0) return false;
+  for (size_t i = 0; i < sizeof action_services / sizeof action_services[0]; i++) {
+    size_t m = strlen(action_services[i]);
+    if (n > m + t && strncmp(name + n - t - m, action_services[i], m) == 0) return true;
   }
   return false;
+}
+
+static bool is_action_reply_topic(const char *topic) {
+  return strncmp(topic, REPLY_PREFIX, strlen(REPLY_PREFIX)) == 0 &&
+         strlen(topic) > strlen(REPLY_PREFIX) && is_action_service(topic + 2, REPLY_SUFFIX);
+}
+
+bool cft_replies_is_action_service(const char *service_name) {
+  return service_name != NULL && is_action_service(service_name, "");
+}
+
+static void say_routed(const char *name) {
+  if (cft_debug_enabled())
+    cft_say("reply writer of %.200s: each reply goes to the requesting participant's readers", name);
+}
+
+void cft_replies_writer_routed(const char *service_name) {
+  count(MARKED);
+  say_routed(service_name);
 }
 
 // ---- the marks: the GUIDs of the reply writers -----------------------------------------------------
@@ -149,25 +184,14 @@ void cft_replies_reader_matched(const void *writer, const void *reader_guid, con
   const uint8_t *guid = guid_of != NULL ? guid_of(writer) : NULL;
   if (guid == NULL || is_marked(guid)) return;
   mark(guid);
-  if (cft_debug_enabled())
-    cft_say("reply writer of %.200s: each reply goes to the requesting participant's readers", topic);
+  say_routed(topic);
 }
 
-int cft_replies_relevance(const void *change, const void *reader_guid) {
-  if (__atomic_load_n(&marked_writers, __ATOMIC_ACQUIRE) == 0 || reader_guid == NULL) return -1;
-#if CFT_LAYOUT_KNOWN
+int cft_reply_verdict(const uint8_t *related, int32_t high, uint32_t low,
+                      const uint8_t *reader_guid) {
   static const uint8_t unknown[16];
-  const uint8_t *c = change;
-  const uint8_t *related = c + CC_RELATED_WRITER_GUID;
   // Most changes (feedback, status, anything but replies and requests) have no related identity.
-  if (memcmp(related, unknown, sizeof unknown) == 0 || !is_marked(c + CC_WRITER_GUID)) return -1;
-  uint32_t kind, low;
-  int32_t high;
-  _Static_assert(CC_KIND_SIZE == sizeof kind, "ChangeKind_t is not 4 bytes");
-  memcpy(&kind, c + CC_KIND, sizeof kind);
-  memcpy(&high, c + CC_RELATED_SEQUENCE, sizeof high);
-  memcpy(&low, c + CC_RELATED_SEQUENCE + sizeof high, sizeof low);
-  if (kind != 0) return -1;
+  if (reader_guid == NULL || memcmp(related, unknown, sizeof unknown) == 0) return -1;
   uint8_t entity_kind = related[15];
   bool user_entity = entity_kind == 0x02 || entity_kind == 0x03 || entity_kind == 0x04 ||
                      entity_kind == 0x07;
@@ -181,6 +205,23 @@ int cft_replies_relevance(const void *change, const void *reader_guid) {
   }
   count(WITHHELD);
   return 0;
+}
+
+int cft_replies_relevance(const void *change, const void *reader_guid) {
+  if (__atomic_load_n(&marked_writers, __ATOMIC_ACQUIRE) == 0 || reader_guid == NULL) return -1;
+#if CFT_LAYOUT_KNOWN
+  static const uint8_t unknown[16];
+  const uint8_t *c = change;
+  const uint8_t *related = c + CC_RELATED_WRITER_GUID;
+  if (memcmp(related, unknown, sizeof unknown) == 0 || !is_marked(c + CC_WRITER_GUID)) return -1;
+  uint32_t kind, low;
+  int32_t high;
+  _Static_assert(CC_KIND_SIZE == sizeof kind, "ChangeKind_t is not 4 bytes");
+  memcpy(&kind, c + CC_KIND, sizeof kind);
+  memcpy(&high, c + CC_RELATED_SEQUENCE, sizeof high);
+  memcpy(&low, c + CC_RELATED_SEQUENCE + sizeof high, sizeof low);
+  if (kind != 0) return -1;
+  return cft_reply_verdict(related, high, low, reader_guid);
 #else
   (void)change;
   return -1;

@@ -90,7 +90,6 @@
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
-#include <link.h>
 #include <pthread.h>
 #include <stdbool.h>
 #include <stdint.h>
@@ -252,54 +251,16 @@ static const uint8_t *requester_of(const uint8_t *uuid) {
   return r->used ? r->prefix : NULL;
 }
 
-// The definition of rmw_take_request that rcl would have called: the one in a loaded object other
-// than the guard, rmw_implementation's first (rclpy loads it in a local scope, and the wheels
-// rename it, so neither RTLD_NEXT nor its soname finds it). Looked up once, outside Fast DDS.
-#define MAX_OBJECTS 512
-struct objects {
-  int count;
-  char *names[MAX_OBJECTS];
-};
-
-static int collect_object(struct dl_phdr_info *info, size_t size, void *data) {
-  (void)size;
-  struct objects *o = data;
-  if (info->dlpi_name != NULL && info->dlpi_name[0] != '\0' && o->count < MAX_OBJECTS) {
-    char *name = strdup(info->dlpi_name);
-    if (name != NULL) o->names[o->count++] = name;
-  }
-  return 0;
-}
-
+// The definition of rmw_take_request that rcl would have called: rmw_implementation's (rclpy loads
+// it in a local scope, and the wheels rename it). Looked up once, outside Fast DDS.
 typedef int32_t (*take_request_fn)(const void *service, void *header, void *request, bool *taken);
-
-static take_request_fn find_take_request(void *ours) {
-  struct objects o = {0};
-  dl_iterate_phdr(collect_object, &o);  // dlopen only after it: it holds the loader's lock
-  void *found = NULL;
-  bool preferred = false;
-  for (int i = 0; i < o.count; i++) {
-    void *handle = dlopen(o.names[i], RTLD_LAZY | RTLD_NOLOAD);
-    void *p = handle != NULL ? dlsym(handle, TAKE_REQUEST) : NULL;
-    Dl_info where;
-    // Defined in this object itself, not found through its dependencies.
-    if (p != NULL && p != ours && dladdr(p, &where) != 0 && where.dli_fname != NULL &&
-        strcmp(where.dli_fname, o.names[i]) == 0) {
-      bool rmw_implementation = strstr(o.names[i], "rmw_implementation") != NULL;
-      if (found == NULL || (rmw_implementation && !preferred)) found = p, preferred = rmw_implementation;
-    }
-    // The handle stays open: the object is loaded anyway, and `found` must not outlive it.
-    free(o.names[i]);
-  }
-  return (take_request_fn)found;
-}
 
 CFT_EXPORT int32_t rmw_take_request(const void *service, void *request_header, void *ros_request,
                                     bool *taken);
 static take_request_fn real_take_request;
 static pthread_once_t take_request_once = PTHREAD_ONCE_INIT;
 static void resolve_take_request(void) {
-  real_take_request = find_take_request((void *)rmw_take_request);
+  real_take_request = (take_request_fn)cft_guard_loaded_symbol(TAKE_REQUEST, "rmw_implementation");
 }
 
 int32_t rmw_take_request(const void *service, void *request_header, void *ros_request,
