@@ -147,7 +147,7 @@ def call_counts() -> dict[str, int]:
 #: The counters of cft_guard_filter_count() in _guard_filter.c, in its order.
 FILTER_COUNTERS = ('uuid_verdicts', 'fastdds_verdicts', 'compiled', 'not_compiled', 'dropped',
                    'evicted', 'foreign_instance', 'verified', 'mismatches', 'kept', 'left',
-                   'relevance_verdicts')
+                   'relevance_verdicts', 'refused', 'unknown_classes')
 
 
 def filter_counts() -> dict[str, int]:
@@ -170,7 +170,11 @@ def filter_counts() -> dict[str, int]:
       per writer and filter change); ``left``: such readers left to Fast DDS (the writer's virtual
       call would not reach the guard, or the guard's table was full); ``relevance_verdicts``: the
       verdicts given for kept readers when the writer asked whether a sample is relevant to them.
-      ``CFT_GUARD_KEEP_READERS=0`` leaves every reader to Fast DDS.
+      ``CFT_GUARD_KEEP_READERS=0`` leaves every reader to Fast DDS;
+    - ``refused``: remote readers' filters of the library's classes whose expression is outside the
+      class's grammar (no filter is kept: the reader gets every sample, as a plain one);
+      ``unknown_classes``: remote readers' filter classes named like the library's (``CFT_ACTION``
+      in any case) that are none of them. The first of each is said once on stderr.
 
     An empty dict when the guard is not preloaded.
     """
