@@ -326,7 +326,8 @@ def reply_counts() -> dict[str, int]:
 
 #: The counters of cft_guard_status_count() in _guard_status.c, in its order.
 STATUS_COUNTERS = ('requests', 'implausible', 'verdicts', 'changed', 'owed', 'withheld',
-                   'unknown', 'malformed', 'resets', 'kept', 'deferred', 'heartbeat_periods')
+                   'unknown', 'malformed', 'resets', 'kept', 'deferred', 'heartbeat_periods',
+                   'contested')
 
 #: Environment variable that turns the status filter off (``off`` or ``0``).
 STATUS_ENV = 'CFT_GUARD_STATUS'
@@ -354,7 +355,9 @@ def status_counts() -> dict[str, int]:
       when a HEARTBEAT shows it one it lacks (``CFT_GUARD_DEFER_OWED=0`` sends them at once);
     - ``heartbeat_periods``: status writers that heartbeat every 100 ms while a client has not
       acknowledged, instead of Fast DDS's 3 s (``CFT_GUARD_STATUS_HEARTBEAT_MS``: the period, or
-      ``off``).
+      ``off``);
+    - ``contested``: goal requests for a goal UUID that another participant had requested (the
+      first requester keeps the goal's status; the first such request is said once on stderr).
 
     An empty dict when the guard is not preloaded.
     """
