@@ -457,7 +457,7 @@ static const char *printable(char *out, size_t size, const char *text, size_t li
 void cft_filter_refused(const char *class_name, const char *type_name, const char *expression) {
   count(C_REFUSED);
   static bool said;
-  if (__atomic_exchange_n(&said, true, __ATOMIC_RELAXED)) return;
+  if (!cft_first(&said)) return;
   char type[256], text[256];
   cft_say("refused a remote reader's %s filter for the type %s: its expression (%zu bytes: \"%s\") "
           "is not in that class's grammar, so its writers keep no filter for it and send it every "
@@ -473,7 +473,7 @@ void cft_filter_class_unknown(const char *class_name) {
     return;
   count(C_UNKNOWN);
   static bool said;
-  if (__atomic_exchange_n(&said, true, __ATOMIC_RELAXED)) return;
+  if (!cft_first(&said)) return;
   char name[256];
   cft_say("a remote reader's filter class \"%s\" is none of the library's (%s, %s, %s, %s): its "
           "writers keep no filter for it and send it every sample, as to a plain reader (said "
@@ -556,7 +556,7 @@ static const struct cft_filter_grammar *claim_grammar(const char *class_name) {
 }
 
 static void say_once(bool *said, const char *what) {
-  if (!__atomic_exchange_n(said, true, __ATOMIC_RELAXED)) cft_say("%s", what);
+  if (cft_first(said)) cft_say("%s", what);
 }
 
 bool cft_filter_claim_begin(const void *writer, const void *reader_guid, const void *reader_info) {

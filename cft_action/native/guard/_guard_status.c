@@ -255,7 +255,7 @@ static void record_requester(const uint8_t *uuid, const uint8_t *guid) {
   if (contested) {
     count(CONTESTED);
     static bool said;
-    if (!__atomic_exchange_n(&said, true, __ATOMIC_RELAXED))
+    if (cft_first(&said))
       cft_say("a goal request for a goal that another participant had requested: the first "
               "requester keeps the goal's status (the server rejects such a request; said once, "
               "cft_action.guard.status_counts()['contested'] counts each)");
