@@ -136,6 +136,7 @@ HOSTILE = [
 PLAIN = [Hostile(f'plain_{topic}', topic, b'', b'', said=None)
          for topic in ('feedback', 'status', 'events')]
 
+
 def participant(spec: Hostile) -> str:
     """The hostile participant's participant for a resident reader of ``spec``.
 
@@ -256,9 +257,9 @@ def run(hostile_program: Path) -> Iterator[Run]:
         for client in clients.values():
             client.expect('READY', 60)
         base = server.request_json('stats', 'STATS')['guard_calls']['remove_reader_filter']
-        churned = hostile.request(f'churn {CHURN_FIRST} {CHURN_WINDOW} {CHURN_PAUSE_MS} h',
-                                  'CHURNED', 120)
-        assert churned == f'CHURNED {CHURN_FIRST} 0', churned
+        reply = hostile.request(f'churn {CHURN_FIRST} {CHURN_WINDOW} {CHURN_PAUSE_MS} h',
+                                'CHURNED', 120)
+        assert reply == f'CHURNED {CHURN_FIRST} 0', reply
         # Each is matched, then removed, by one writer of the server (its feedback, status or
         # /parameter_events writer).
         expected = base + CHURN_FIRST
@@ -267,9 +268,8 @@ def run(hostile_program: Path) -> Iterator[Run]:
         for client in clients.values():
             client.send('go')
         rest = CHURN - CHURN_FIRST
-        churned = hostile.request(f'churn {rest} {CHURN_WINDOW} {CHURN_PAUSE_MS} h', 'CHURNED',
-                                  180)
-        assert churned == f'CHURNED {rest} 0', churned
+        reply = hostile.request(f'churn {rest} {CHURN_WINDOW} {CHURN_PAUSE_MS} h', 'CHURNED', 180)
+        assert reply == f'CHURNED {rest} 0', reply
         reports = {mode: json.loads(client.expect('RESULT', 90).split(' ', 1)[1])
                    for mode, client in clients.items()}
         expected = base + CHURN
