@@ -25,7 +25,7 @@
 //                           in turn, one every MS milliseconds, at most WINDOW alive (the oldest
 //                           deleted first), then deletes the rest: CHURNED <count> <failed to open>
 //   count READER            COUNT READER <matched writers> <samples> {"<uuid hex>": n, ...}
-// It prints READY once its participant is up, and leaves at the end of its input.
+// It prints READY once its first participant is up, and leaves at the end of its input.
 #include <fastdds/dds/domain/DomainParticipant.hpp>
 #include <fastdds/dds/domain/DomainParticipantFactory.hpp>
 #include <fastdds/dds/subscriber/DataReader.hpp>
