@@ -89,7 +89,7 @@ ASAN_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_uuid_cla
     tests/test_node_class.py tests/test_reader_lock.py tests/test_rate_limit.py \
     tests/test_goal_status.py tests/test_status_wire.py tests/test_replies.py \
     tests/test_own_responses.py tests/test_heartbeats.py tests/test_signatures.py \
-    tests/test_reader_filter_limit.py tests/test_parameter_events.py
+    tests/test_reader_filter_limit.py tests/test_parameter_events.py tests/test_hostile.py
 SANITIZE := -fsanitize=address,undefined -fno-sanitize-recover=undefined -fno-omit-frame-pointer
 # A SIGSEGV is reported by ASan too (allow_user_segv_handler=0: Python's faulthandler would take it).
 SANITIZER_LOG := allow_user_segv_handler=0:log_path=$(CURDIR)/$(ASAN_TREE)/sanitizer

@@ -149,7 +149,7 @@ def call_counts() -> dict[str, int]:
 #: The counters of cft_guard_filter_count() in _guard_filter.c, in its order.
 FILTER_COUNTERS = ('uuid_verdicts', 'fastdds_verdicts', 'compiled', 'not_compiled', 'dropped',
                    'evicted', 'foreign_instance', 'verified', 'mismatches', 'kept', 'left',
-                   'relevance_verdicts')
+                   'relevance_verdicts', 'refused', 'unknown_classes')
 
 
 def filter_counts() -> dict[str, int]:
@@ -172,7 +172,11 @@ def filter_counts() -> dict[str, int]:
       per writer and filter change); ``left``: such readers left to Fast DDS (the writer's virtual
       call would not reach the guard, or the guard's table was full); ``relevance_verdicts``: the
       verdicts given for kept readers when the writer asked whether a sample is relevant to them.
-      ``CFT_GUARD_KEEP_READERS=0`` leaves every reader to Fast DDS.
+      ``CFT_GUARD_KEEP_READERS=0`` leaves every reader to Fast DDS;
+    - ``refused``: remote readers' filters of the library's classes whose expression is outside the
+      class's grammar (no filter is kept: the reader gets every sample, as a plain one);
+      ``unknown_classes``: remote readers' filter classes named like the library's (``CFT_ACTION``
+      in any case) that are none of them. The first of each is said once on stderr.
 
     An empty dict when the guard is not preloaded.
     """
@@ -341,7 +345,8 @@ def reply_counts() -> dict[str, int]:
 
 #: The counters of cft_guard_status_count() in _guard_status.c, in its order.
 STATUS_COUNTERS = ('requests', 'implausible', 'verdicts', 'changed', 'owed', 'withheld',
-                   'unknown', 'malformed', 'resets', 'kept', 'deferred', 'heartbeat_periods')
+                   'unknown', 'malformed', 'resets', 'kept', 'deferred', 'heartbeat_periods',
+                   'contested')
 
 #: Environment variable that turns the status filter off (``off`` or ``0``).
 STATUS_ENV = 'CFT_GUARD_STATUS'
@@ -369,7 +374,9 @@ def status_counts() -> dict[str, int]:
       when a HEARTBEAT shows it one it lacks (``CFT_GUARD_DEFER_OWED=0`` sends them at once);
     - ``heartbeat_periods``: status writers that heartbeat every 100 ms while a client has not
       acknowledged, instead of Fast DDS's 3 s (``CFT_GUARD_STATUS_HEARTBEAT_MS``: the period, or
-      ``off``).
+      ``off``);
+    - ``contested``: goal requests for a goal UUID that another participant had requested (the
+      first requester keeps the goal's status; the first such request is said once on stderr).
 
     An empty dict when the guard is not preloaded.
     """

@@ -5,7 +5,8 @@
 // data (class, related topic, expression, parameters, with its type and topic names and GUID), as
 // Fast DDS keeps it in a ReaderProxyData, read where a writer matches the reader; then the
 // verdicts on the writer's samples for that reader: the library's classes kept by the guard
-// (uuid, node, status) and DDS-SQL filters answered from the uuid bytes.
+// (uuid, node, status) and DDS-SQL filters answered from the uuid bytes; and what it says of a
+// filter it refuses.
 // Input: the reader's discovery data (fuzz_rpd_read in fuzz_common.h), a byte of flags, then
 // samples, each a kind byte, a 2-byte little-endian length and the sample's bytes.
 //
@@ -52,6 +53,13 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     cft_filter_reader_changed(&writer, guid, rpd.info);
   }
   (void)cft_filter_reader_topic(rpd.info, guid);
+  // What the guard refuses (a factory's refusal, a class named like the library's), and how it
+  // quotes the remote bytes: said once a process, so quoted here for every input too.
+  cft_filter_class_unknown(rpd.class_name);
+  if (rpd.expression != NULL) cft_filter_refused(rpd.class_name, rpd.class_name, rpd.expression);
+  char quoted[256];
+  (void)printable(quoted, sizeof quoted, rpd.expression != NULL ? rpd.expression : "", 40);
+  (void)printable(quoted, sizeof quoted, rpd.class_name != NULL ? rpd.class_name : "", 60);
   struct fuzz_change change;
   _Alignas(16) uint8_t sample_info[64] = {0};
   uint64_t sequence = 0;

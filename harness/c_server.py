@@ -10,11 +10,11 @@ make sense (feedback period, padding, depths, result timeout, ``--hold-goals``) 
 K action servers in the process, ``ACTION`` for one, ``ACTION_0`` ... ``ACTION_<K-1>`` for more.
 
 :func:`build` compiles it once per source and toolchain into a cache outside the repository
-(``$XDG_CACHE_HOME/cft_action/c_server/``, or ``~/.cache/...``), against the headers and
-libraries of this Python's prefix (the ROS wheels: ``<venv>/include/<pkg>/<pkg>/*.h``,
-``<venv>/lib`` and ``site-packages/ros_*.libs``) and of each ``AMENT_PREFIX_PATH`` entry (a sourced
-ROS). The wheels' ``librcl`` pulls in a Python extension of ``type_description_interfaces`` that
-needs libpython's symbols at load time, so the server links libpython too when it is shared.
+(:mod:`harness.native_cache`), against the headers and libraries of this Python's prefix (the ROS
+wheels: ``<venv>/include/<pkg>/<pkg>/*.h``, ``<venv>/lib`` and ``site-packages/ros_*.libs``) and of
+each ``AMENT_PREFIX_PATH`` entry (a sourced ROS). The wheels' ``librcl`` pulls in a Python extension
+of ``type_description_interfaces`` that needs libpython's symbols at load time, so the server links
+libpython too when it is shared.
 :class:`CServerUnavailable` says why it cannot be built (no compiler, no headers, a failed build).
 
 :func:`start` runs it as a :class:`CServer`: a :class:`harness.proc.Proc` whose ``stats()`` names
@@ -24,18 +24,16 @@ the guard's counters as :mod:`cft_action.guard` does (the C server reads them ra
 from __future__ import annotations
 
 import glob
-import hashlib
 import json
 import os
 import shutil
-import subprocess
 import sys
 import sysconfig
-import tempfile
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
 from cft_action import guard
+from harness import native_cache
 from harness.proc import Proc
 
 #: The server's source.
@@ -62,7 +60,7 @@ GUARD_FAMILIES = {'guard_calls': GUARD_CALLS, 'guard_filter': guard.FILTER_COUNT
                   'guard_status': guard.STATUS_COUNTERS}
 
 
-class CServerUnavailable(RuntimeError):
+class CServerUnavailable(native_cache.BuildUnavailable):
     """The C server cannot be built here; the message says why (tests skip with it)."""
 
 
@@ -127,39 +125,18 @@ def compile_command(output: Path) -> list[str]:
             *[f'-l{name}' for name in LIBRARIES], *libpython(), '-lpthread', '-ldl']
 
 
-def cache_dir() -> Path:
-    """``$XDG_CACHE_HOME/cft_action/c_server`` (default ``~/.cache``)."""
-    base = os.environ.get('XDG_CACHE_HOME') or os.path.join(os.path.expanduser('~'), '.cache')
-    return Path(base) / 'cft_action' / 'c_server'
-
-
 def build() -> Path:
-    """The built server, compiled on first use for this source and toolchain (cached by their hash).
+    """The built server, compiled on first use for this source and toolchain (cached by their hash,
+    :mod:`harness.native_cache`).
 
     :raises CServerUnavailable: it cannot be built here, and why.
     """
-    placeholder = Path('OUTPUT')
-    command = compile_command(placeholder)
-    key = hashlib.sha256(SOURCE.read_bytes() + '\0'.join(command).encode()).hexdigest()[:16]
-    for base in (cache_dir(), Path(tempfile.gettempdir()) / f'cft_action-{os.getuid()}'):
-        binary = base / key / 'action_server'
-        if binary.is_file():
-            return binary
-        try:
-            binary.parent.mkdir(parents=True, exist_ok=True)
-        except OSError:
-            continue  # not writable: the next place
-        # Built beside its final name and renamed: a concurrent session sees it whole or not at all.
-        partial = binary.with_name(f'action_server.{os.getpid()}.tmp')
-        argv = [str(partial) if arg == str(placeholder) else arg for arg in command]
-        built = subprocess.run(argv, capture_output=True, text=True, timeout=180)
-        if built.returncode != 0:
-            partial.unlink(missing_ok=True)
-            raise CServerUnavailable(f'the C action server does not build: {" ".join(argv)}\n'
-                                     f'{built.stderr.strip()[-2000:]}')
-        os.replace(partial, binary)
-        return binary
-    raise CServerUnavailable(f'no writable cache for the C action server ({cache_dir()})')
+    try:
+        return native_cache.build('c_server', 'action_server', SOURCE,
+                                  compile_command(Path(native_cache.OUTPUT)),
+                                  'the C action server')
+    except native_cache.BuildUnavailable as error:
+        raise CServerUnavailable(str(error)) from None
 
 
 def command(action: str, period: float, *, servers: int = 1, pad: int = 0,

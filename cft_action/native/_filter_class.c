@@ -149,13 +149,17 @@ static uint32_t factory_create(const struct factory *self, const char *class_nam
                                const char *type_name, const void *data_type,
                                const char *expression, const void *filter_parameters,
                                void **filter_instance) {
-  (void)class_name, (void)type_name, (void)data_type, (void)filter_parameters;
+  (void)data_type, (void)filter_parameters;
   struct filter *existing = *filter_instance;
   if (expression == NULL) return existing != NULL ? RETCODE_OK : RETCODE_BAD_PARAMETER;
   const struct cft_filter_class_owner *decides = __atomic_load_n(&owner, __ATOMIC_ACQUIRE);
   if (existing == NULL && (decides == NULL || !decides->may_create())) return RETCODE_UNSUPPORTED;
   void *program = self->grammar->compile(expression);
-  if (program == NULL) return RETCODE_BAD_PARAMETER;
+  if (program == NULL) {
+    if (decides != NULL && decides->refused != NULL)
+      decides->refused(class_name, type_name, expression);
+    return RETCODE_BAD_PARAMETER;
+  }
   if (existing != NULL) {  // an update in place: Fast DDS hands back only this factory's filters
     pthread_rwlock_wrlock(&existing->lock);
     void *old = existing->program;

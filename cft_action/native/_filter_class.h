@@ -60,13 +60,16 @@ struct cft_filter_grammar {
 // process only for its own readers, since a writer there would filter unguarded), and what it
 // does with one a factory created (not updated); `filter` is opaque. Optionally one class of its
 // own (`own_class`, with `own_grammar`), which only this owner answers: the guard does not know
-// it, so no writer ever filters with it. Given by that library, so that calls go one way: from it
+// it, so no writer ever filters with it. Optionally `refused`, told of every expression that a
+// factory may create a filter for but that is outside its class's grammar (the filter is then not
+// created, and Fast DDS keeps none). Given by that library, so that calls go one way: from it
 // into this file.
 struct cft_filter_class_owner {
   bool (*may_create)(void);
   void (*created)(void *filter);
   const char *own_class;
   const struct cft_filter_grammar *own_grammar;
+  void (*refused)(const char *class_name, const char *type_name, const char *expression);
 };
 
 // The factory (an object with an IContentFilterFactory vtable) if `class_name` is one of these

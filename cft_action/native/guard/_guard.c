@@ -275,7 +275,8 @@ CFT_EXPORT int cft_guard_closed_readers(const uint8_t *writer_guid) {
   if (!cft_guard_knows_fastdds2()) return -1;
   return cft_filter_class_closed(writer_guid);
 }
-static const struct cft_filter_class_owner guard_owner = {guard_may_create, guard_created};
+static const struct cft_filter_class_owner guard_owner = {
+    .may_create = guard_may_create, .created = guard_created, .refused = cft_filter_refused};
 
 // The writers of a guarded server filter for readers of the library's classes: every filter change
 // is locked here. Unguarded (an unknown Fast DDS), the classes stay unknown to the server, which
@@ -301,7 +302,9 @@ void *cft_find(void *self, const char *class_name) {
     cft_family_missing(f, FN_FIND);
     return NULL;
   }
-  return real(self, class_name);
+  void *theirs = real(self, class_name);
+  if (active && theirs == NULL) cft_filter_class_unknown(class_name);
+  return theirs;
 }
 
 

@@ -95,6 +95,8 @@ enum {
   C_KEPT,          // readers of the library's classes kept in the table instead of Fast DDS's
   C_LEFT,          // readers of those classes left to Fast DDS (see cft_filter_claim_begin)
   C_RELEVANCE,     // verdicts given in is_relevant for the readers kept
+  C_REFUSED,       // remote readers' filters of the library's classes outside their grammar
+  C_UNKNOWN,       // remote readers' filter classes named like the library's, none of them
   C_COUNT
 };
 static unsigned long counters[C_COUNT];
@@ -427,6 +429,59 @@ static void drop(const void *writer, const void *reader_guid, int why) {
   pthread_mutex_unlock(&table_lock);
 }
 
+// ---- what the guard refused ------------------------------------------------------------------------
+// A remote reader's filter comes from its discovery data, which any participant on the domain
+// writes: a filter of the library's classes whose expression is outside the class's grammar is not
+// created (the factory refuses it, and Fast DDS keeps no filter for the reader), and a class named
+// like the library's but none of them has no factory. Either way the writer sends that reader
+// every sample, as to a plain reader. Each is counted; the first of each kind is said, once.
+
+// `text` (remote bytes) for a log line: printable ASCII as is, any other byte as \xNN, at most
+// `limit` bytes of it, then "..." if there was more.
+static const char *printable(char *out, size_t size, const char *text, size_t limit) {
+  size_t n = 0;
+  const unsigned char *c = (const unsigned char *)text;
+  for (size_t i = 0; c[i] != '\0' && n + 8 < size; i++) {
+    if (i == limit) {
+      memcpy(out + n, "...", 3);
+      n += 3;
+      break;
+    }
+    if (c[i] >= 0x20 && c[i] < 0x7f && c[i] != '\\' && c[i] != '"') out[n++] = (char)c[i];
+    else n += (size_t)snprintf(out + n, size - n, "\\x%02x", c[i]);
+  }
+  out[n] = '\0';
+  return out;
+}
+
+void cft_filter_refused(const char *class_name, const char *type_name, const char *expression) {
+  count(C_REFUSED);
+  static bool said;
+  if (!cft_first(&said)) return;
+  char type[256], text[256];
+  cft_say("refused a remote reader's %s filter for the type %s: its expression (%zu bytes: \"%s\") "
+          "is not in that class's grammar, so its writers keep no filter for it and send it every "
+          "sample, as to a plain reader (said once; cft_action.guard.filter_counts()['refused'] "
+          "counts each)", class_name, printable(type, sizeof type, type_name ? type_name : "?", 60),
+          expression ? strlen(expression) : 0,
+          printable(text, sizeof text, expression ? expression : "", 40));
+}
+
+void cft_filter_class_unknown(const char *class_name) {
+  if (class_name == NULL || strcasestr(class_name, "CFT_ACTION") == NULL ||
+      strcmp(class_name, CFT_STATUS_CLASS) == 0 || cft_filter_class_name(class_name) != NULL)
+    return;
+  count(C_UNKNOWN);
+  static bool said;
+  if (!cft_first(&said)) return;
+  char name[256];
+  cft_say("a remote reader's filter class \"%s\" is none of the library's (%s, %s, %s, %s): its "
+          "writers keep no filter for it and send it every sample, as to a plain reader (said "
+          "once; cft_action.guard.filter_counts()['unknown_classes'] counts each)",
+          printable(name, sizeof name, class_name, 60), CFT_UUID_CLASS, CFT_NODE_CLASS,
+          CFT_RATE_CLASS, CFT_STATUS_CLASS);
+}
+
 // ---- the hooks -------------------------------------------------------------------------------------
 static cft_evaluate_fn real_evaluate;  // set once, before the family turns active
 static bool enabled, verify;
@@ -501,7 +556,7 @@ static const struct cft_filter_grammar *claim_grammar(const char *class_name) {
 }
 
 static void say_once(bool *said, const char *what) {
-  if (!__atomic_exchange_n(said, true, __ATOMIC_RELAXED)) cft_say("%s", what);
+  if (cft_first(said)) cft_say("%s", what);
 }
 
 bool cft_filter_claim_begin(const void *writer, const void *reader_guid, const void *reader_info) {
@@ -526,7 +581,11 @@ bool cft_filter_claim_begin(const void *writer, const void *reader_guid, const v
   // An expression outside the class's grammar: its factory refuses it too, and Fast DDS keeps no
   // filter for the reader, which then receives every sample.
   void *program = cft_filter_grammar_compile(grammar, f.expression);
-  if (program == NULL) return false;
+  if (program == NULL) {
+    // The factories of the other classes refuse it too (and say so); the status class has none.
+    if (grammar == &cft_guard_status_grammar) cft_filter_refused(f.class_name, f.type, f.expression);
+    return false;
+  }
   pthread_mutex_lock(&table_lock);
   bool room = room_locked(writer, reader_guid) != NULL;
   pthread_mutex_unlock(&table_lock);

@@ -40,6 +40,12 @@ void cft_filter_claim_end(void);
 // verdicts off, as theirs does); NULL when it cannot be read.
 const char *cft_filter_reader_topic(const void *reader_info, const void *reader_guid);
 
+// A remote reader's filter of one of the library's classes whose expression is outside the class's
+// grammar (no filter is created for it), and a remote reader's filter class that is named like the
+// library's (CFT_ACTION in any case) but is none of them (no factory): counted, the first said once.
+void cft_filter_refused(const char *class_name, const char *type_name, const char *expression);
+void cft_filter_class_unknown(const char *class_name);
+
 // DataWriterImpl::is_relevant for a reader the guard keeps: 1 or 0; -1 when Fast DDS answers.
 int cft_filter_relevance(const void *writer, const void *change, const void *reader_guid);
 // The verdict for one sample and one reader: the uuid program's when there is one for the

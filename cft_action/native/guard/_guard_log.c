@@ -15,6 +15,8 @@ int cft_debug_enabled(void) {
   return v != NULL && v[0] != '\0' && strcmp(v, "0") != 0;
 }
 
+bool cft_first(bool *flag) { return !__atomic_exchange_n(flag, true, __ATOMIC_RELAXED); }
+
 void cft_say(const char *fmt, ...) {
   char line[768];
   int n = snprintf(line, sizeof line, "[cft_action guard %d] ", (int)getpid());

@@ -4,9 +4,14 @@
 #ifndef CFT_ACTION_GUARD_LOG_H_
 #define CFT_ACTION_GUARD_LOG_H_
 
+#include <stdbool.h>
+
 // One line on stderr, "[cft_action guard <pid>] ...", written with one write(2) so that lines of
 // different threads do not interleave.
 __attribute__((format(printf, 1, 2))) void cft_say(const char *fmt, ...);
+
+// True the first time it is called with `flag` (false before), then false: for what is said once.
+bool cft_first(bool *flag);
 
 // 1 when CFT_GUARD_DEBUG is set (and not "0"): say what the guard does, not only what went wrong.
 int cft_debug_enabled(void);

@@ -168,6 +168,7 @@ enum {
   KEPT,         // status readers kept by _guard_filter.c (of its `kept`)
   DEFERRED,     // owed changes not sent with the write, left for the reader to ask for
   HEARTBEATS,   // status writers given STATUS_HEARTBEAT_MS
+  CONTESTED,    // goal requests for a goal UUID another participant had requested (not recorded)
   COUNTERS
 };
 static unsigned long counters[COUNTERS];
@@ -224,7 +225,12 @@ static struct requester *requester_slot(const uint8_t *uuid) {
 
 #if STATUS_LAYOUT_KNOWN
 static unsigned requester_count;
+// The first request for a goal UUID names its requester: one from another participant with the
+// same UUID (which the server rejects, as a goal it already has) must not take the goal's status
+// from the client that requested it (any participant can read the goal UUIDs off the status
+// topic, and send such requests).
 static void record_requester(const uint8_t *uuid, const uint8_t *guid) {
+  bool contested = false;
   pthread_mutex_lock(&requesters_lock);
   if (requesters == NULL) requesters = calloc(REQUESTER_SLOTS, sizeof *requesters);
   if (requesters != NULL) {
@@ -234,13 +240,25 @@ static void record_requester(const uint8_t *uuid, const uint8_t *guid) {
       count(RESETS);
     }
     struct requester *r = requester_slot(uuid);
-    if (!r->used) requester_count++;
-    memcpy(r->uuid, uuid, UUID_SIZE);
-    memcpy(r->prefix, guid, PREFIX_SIZE);
-    r->used = true;
-    count(REQUESTS);
+    if (r->used && memcmp(r->prefix, guid, PREFIX_SIZE) != 0) {
+      contested = true;  // said below, outside the lock
+    } else {
+      if (!r->used) requester_count++;
+      memcpy(r->uuid, uuid, UUID_SIZE);
+      memcpy(r->prefix, guid, PREFIX_SIZE);
+      r->used = true;
+      count(REQUESTS);
+    }
   }
   pthread_mutex_unlock(&requesters_lock);
+  if (contested) {
+    count(CONTESTED);
+    static bool said;
+    if (cft_first(&said))
+      cft_say("a goal request for a goal that another participant had requested: the first "
+              "requester keeps the goal's status (the server rejects such a request; said once, "
+              "cft_action.guard.status_counts()['contested'] counts each)");
+  }
 }
 #endif
 
@@ -678,7 +696,7 @@ void cft_status_reader_kept(void) {
 // In the order of the enum above: 0 requests recorded, 1 implausible request headers, 2 verdicts,
 // 3 passed (changed), 4 passed (owed), 5 withheld, 6 entries of unknown requesters, 7 malformed
 // samples, 8 resets of the requesters' record, 9 status readers kept, 10 owed changes deferred,
-// 11 status writers given the shorter heartbeat period.
+// 11 status writers given the shorter heartbeat period, 12 contested goal requests.
 CFT_EXPORT unsigned long cft_guard_status_count(int which) {
   return which >= 0 && which < COUNTERS ? __atomic_load_n(&counters[which], __ATOMIC_RELAXED) : 0;
 }
