@@ -101,11 +101,13 @@ def test_each_enclave_gets_its_own_goals_filtered_on_the_writer(keystore: Keysto
     plain client's port gets a datagram per feedback write, the library's about their own."""
     run = secured_run(keystore, MIXED, together=True, release_after=1.5)
     for (mode, _, _), report in zip(MIXED, run.reports):
-        assert report['complete_goals'] == GOALS and report['misrouted'] == 0, (mode, report)
         assert report['results'] == GOALS and report['stale_handles'] == 0, (mode, report)
-        if mode != 'rclpy':
+        assert report['misrouted'] == 0, (mode, report)
+        if mode != 'rclpy':  # (plain rclpy drops a goal's late feedback once its result is in)
+            assert report['complete_goals'] == GOALS, (mode, report)
             assert report['filtered_in'] == 'writer', (mode, report)
-            assert report['responses_dropped'] == 0, (mode, report)  # replies: the writer's filter
+            # the others' replies never came: the guard filtered them in the server's writers
+            assert report['responses_dropped'] == 0 < report['responses_passed'], (mode, report)
     status = {k: v - run.stats_at_go['guard_status'][k] for k, v in
               run.stats_after['guard_status'].items()}
     replies = {k: v - run.stats_at_go['guard_replies'][k] for k, v in
