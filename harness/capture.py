@@ -346,9 +346,9 @@ def protected_by_port(interface: str, writers: set[bytes], stop: threading.Event
     until ``stop`` is set, by UDP destination port (one port per reader's participant):
     ``datagrams``, and of them ``srtps``, those protected whole (``SRTPS_PREFIX``); ``sec``, the
     submessages protected one by one (``SEC_PREFIX``) that can be seen (not inside an encrypted
-    message); ``samples``, the DATA and first DATA_FRAG of ``writers`` that can be seen (signed,
-    not encrypted). Sets ``listening`` once the socket is bound. Unfragmented IPv4 datagrams
-    only."""
+    message); where the submessages can be seen (signed, not encrypted), ``named``, the datagrams
+    with a submessage of one of ``writers``, and ``samples``, their DATA and first DATA_FRAG. Sets
+    ``listening`` once the socket is bound. Unfragmented IPv4 datagrams only."""
     prefixes = {writer[:12] for writer in writers}
     found: dict[int, Counter[str]] = {}
     for port, payload in _received_udp(interface, stop, listening):
@@ -359,8 +359,10 @@ def protected_by_port(interface: str, writers: set[bytes], stop: threading.Event
         seen['datagrams'] += 1
         seen['srtps'] += _SRTPS_PREFIX in kinds
         seen['sec'] += kinds.count(_SEC_PREFIX)
-        seen['samples'] += sum(starts and payload[8:20] + entity in writers
-                               for _, entity, starts in _writer_ids(payload))
+        named = [starts for _, entity, starts in _writer_ids(payload)
+                 if payload[8:20] + entity in writers]
+        seen['named'] += bool(named)
+        seen['samples'] += sum(named)
     return found
 
 

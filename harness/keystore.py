@@ -12,12 +12,13 @@ rmw_dds_common's security files)::
     <root>/enclaves/<enclave>/identity_ca.cert.pem, permissions_ca.cert.pem (the CA)
                               governance.p7s, cert.pem, key.pem, permissions.xml, permissions.p7s
 
-The governance protects discovery, liveliness, whole RTPS messages (``rtps_protection_kind``),
-each submessage (``metadata_protection_kind``) and each payload (``data_protection_kind``) at one
-kind: ``ENCRYPT`` or ``SIGN``; joining needs a certificate of the CA, and every topic's reads and
-writes are access-controlled. An enclave's permissions allow every topic on every domain, but
-those matching its ``deny`` expressions (DDS-Security's fnmatch patterns, e.g.
-``*/cft_action_x/_action/*``), whose rule comes first. Certificates and signatures as sros2 makes
+The governance protects discovery, liveliness, whole RTPS messages (``rtps_protection_kind``) and
+each submessage (``metadata_protection_kind``) at one kind, ``ENCRYPT`` or ``SIGN``, and each
+payload (``data_protection_kind``) at that kind or another (``NONE`` too); joining needs a
+certificate of the CA, and every topic's reads and writes are access-controlled. An enclave's
+permissions allow every topic on every domain, but those matching its ``deny`` expressions
+(DDS-Security's fnmatch patterns, e.g. ``*/cft_action_x/_action/*``), whose rule comes first.
+Certificates and signatures as sros2 makes
 them: prime256v1 keys, SHA-256, S/MIME with a detached signature over the text.
 """
 
@@ -26,7 +27,7 @@ from __future__ import annotations
 import datetime
 import os
 from pathlib import Path
-from typing import Sequence
+from typing import Optional, Sequence
 
 from cryptography import x509
 from cryptography.hazmat.primitives import hashes, serialization
@@ -36,13 +37,15 @@ from cryptography.x509.oid import NameOID
 
 #: The protection kinds a governance can be made with (the whole message, submessages, payloads).
 PROTECTIONS = ('ENCRYPT', 'SIGN')
+#: ... and those of its payloads.
+PAYLOAD_PROTECTIONS = (*PROTECTIONS, 'NONE')
 #: Every ROS domain (rcl's ROS_DOMAIN_ID is 0..232 on UDP).
 _DOMAINS = '<domains><id_range><min>0</min><max>232</max></id_range></domains>'
 _XSI = 'xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance"'
 _VALID_DAYS = 30
 
 
-def _governance(protection: str) -> str:
+def _governance(protection: str, payload: str) -> str:
     return f'''<?xml version="1.0" encoding="UTF-8"?>
 <dds {_XSI}>
   <domain_access_rules>
@@ -61,7 +64,7 @@ def _governance(protection: str) -> str:
           <enable_read_access_control>true</enable_read_access_control>
           <enable_write_access_control>true</enable_write_access_control>
           <metadata_protection_kind>{protection}</metadata_protection_kind>
-          <data_protection_kind>{protection}</data_protection_kind>
+          <data_protection_kind>{payload}</data_protection_kind>
         </topic_rule>
       </topic_access_rules>
     </domain_rule>
@@ -91,12 +94,15 @@ def _permissions(enclave: str, deny: Sequence[str], now: datetime.datetime) -> s
 
 class Keystore:
     """A keystore under ``root`` with one CA and a governance of ``protection`` (one of
-    :data:`PROTECTIONS`); :meth:`enclave` adds an enclave and gives a process's environment."""
+    :data:`PROTECTIONS`), its payloads' ``payload`` (one of :data:`PAYLOAD_PROTECTIONS`, by
+    default ``protection``); :meth:`enclave` adds an enclave and gives a process's environment."""
 
-    def __init__(self, root: Path, protection: str) -> None:
-        if protection not in PROTECTIONS:
-            raise ValueError(f'protection {protection!r} is not one of {PROTECTIONS}')
-        self.root, self.protection = root, protection
+    def __init__(self, root: Path, protection: str, payload: Optional[str] = None) -> None:
+        payload = payload or protection
+        if protection not in PROTECTIONS or payload not in PAYLOAD_PROTECTIONS:
+            raise ValueError(f'protection {protection!r}, payloads {payload!r}: not one of '
+                             f'{PROTECTIONS}, {PAYLOAD_PROTECTIONS}')
+        self.root, self.protection, self.payload = root, protection, payload
         self._now = datetime.datetime.now(datetime.timezone.utc)
         name = x509.Name([x509.NameAttribute(NameOID.COMMON_NAME, 'cft_action test CA')])
         self._ca_key = ec.generate_private_key(ec.SECP256R1())
@@ -104,7 +110,7 @@ class Keystore:
         self._write(root / 'public' / 'ca.cert.pem',
                     self._ca.public_bytes(serialization.Encoding.PEM))
         self._write(root / 'private' / 'ca.key.pem', self._pem(self._ca_key))
-        governance = _governance(protection).encode()
+        governance = _governance(protection, payload).encode()
         self._write(root / 'enclaves' / 'governance.xml', governance)
         self._write(root / 'enclaves' / 'governance.p7s', self._signed(governance))
 

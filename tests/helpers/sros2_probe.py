@@ -21,6 +21,13 @@ from rclpy.qos import QoSProfile, ReliabilityPolicy
 from test_msgs.action import Fibonacci
 
 
+def say(line: str) -> None:
+    """``line`` on a line of its own, in one write: Fast DDS's log thread writes its refusals to
+    the same stdout through its own buffer, and may have left a line unfinished."""
+    sys.stdout.write(f'\n{line}\n')
+    sys.stdout.flush()
+
+
 def main() -> None:
     action, seconds = sys.argv[1], float(sys.argv[2])
     rclpy.init()
@@ -31,7 +38,7 @@ def main() -> None:
     qos = QoSProfile(depth=100, reliability=ReliabilityPolicy.RELIABLE)
     try:
         client = ActionClient(node, Fibonacci, action)
-    except RuntimeError as error:  # rclpy's RCLError
+    except (RuntimeError, ValueError) as error:  # rclpy's RCLError; ActionClient's ValueError
         refused['action_client'] = f'{type(error).__name__}: {error}'
     for name, kind in (('feedback', Fibonacci.Impl.FeedbackMessage), ('status', GoalStatusArray)):
         try:
@@ -39,14 +46,13 @@ def main() -> None:
                                      lambda _, n=name: taken.__setitem__(n, taken[n] + 1), qos)
         except RuntimeError as error:
             refused[name] = f'{type(error).__name__}: {error}'
-    print('READY', flush=True)
+    say('READY')
     sys.stdin.readline()
     end = time.monotonic() + seconds
     while time.monotonic() < end:
         rclpy.spin_once(node, timeout_sec=0.05)
-    print('RESULT ' + json.dumps({
-        'refused': refused, **taken,
-        'server': bool(client is not None and client.server_is_ready())}), flush=True)
+    say('RESULT ' + json.dumps({'refused': refused, **taken,
+                                'server': bool(client is not None and client.server_is_ready())}))
     sys.stdin.readline()
     node.destroy_node()
     rclpy.shutdown()
