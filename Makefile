@@ -126,7 +126,7 @@ bench: $(STAMP)
 COMPAT_CACHE ?= $(or $(XDG_CACHE_HOME),$(HOME)/.cache)/cft-stack
 COMPAT_STACKS ?= apt-2.14.6 head-2.14.x
 COMPAT_TESTS ?= tests/test_guard.py tests/test_guard_filter.py tests/test_uuid_class.py \
-    tests/test_node_class.py tests/test_action_client.py
+    tests/test_node_class.py tests/test_action_client.py tests/test_sros2.py
 
 compat: $(STAMP)
 	compat/run.sh $(VENV) $(COMPAT_CACHE) "$(COMPAT_STACKS)" $(COMPAT_TESTS)

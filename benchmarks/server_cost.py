@@ -20,6 +20,12 @@ Three guard modes, each with its own servers:
 
 A phase whose goals do not finish within ``--phase-timeout`` seconds is cut there; its rate is what
 was published until then, and the rest of that point's configurations run against a fresh server.
+``--security ENCRYPT`` (or ``SIGN``) runs every process with DDS Security (SROS2), Enforce, in one
+enclave of a keystore made for the run (:class:`harness.keystore.Keystore`), whose governance
+protects discovery, liveliness, whole messages, submessages and payloads at that kind: plain rclpy
+and the library under the same governance. ``--network netns`` counts each client's received bytes
+on its own interface (``bytes``, a ratio to plain's too) instead of estimating them.
+
 Results (machine, date, command, every raw figure) go to
 ``benchmarks/results/server-cost-<date>-<host>.json`` after every point; ``--plot`` draws
 ``docs/img/server_cost.png``. Run from the repository's root::
@@ -32,15 +38,18 @@ from __future__ import annotations
 import argparse
 import datetime
 import json
+import os
 import platform
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 from pathlib import Path
 from typing import Any, Optional, Sequence
 
 from harness import load
+from harness.keystore import PROTECTIONS, Keystore
 from harness.machine import environment_facts
 from harness.report import fmt, grid, markdown_table
 
@@ -114,6 +123,8 @@ def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
         'server_cpu_s': phase['server_cpu_goals_s'],
         'cpu_ms_per_msg': summary['server_cpu_ms_per_msg'],
         'own_per_client': summary['own_per_client'],
+        'bytes_per_client': summary['bytes_per_client'],
+        'bytes_method': summary['bytes_method'],
         'foreign_per_client': summary['foreign_per_client'],
         'guard_filter': phase.get('guard_filter', {}),
         **{k: phase[k] for k in ('profile', 'profile_by_library') if k in phase},
@@ -154,6 +165,7 @@ def run_point(spec: load.LoadSpec, configs: Sequence[str], timeout: float,
         f['ratio_to_plain'] = {
             'rate': ratio(f['rate_msgs_per_s'], plain and plain['rate_msgs_per_s']),
             'cpu_per_msg': ratio(f['cpu_ms_per_msg'], plain and plain['cpu_ms_per_msg']),
+            'bytes': ratio(f['bytes_per_client'], plain and plain['bytes_per_client']),
         }
     return figures
 
@@ -176,6 +188,10 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                         help='nominal seconds of feedback per goal')
     parser.add_argument('--phase-timeout', type=float, default=90.0,
                         help='seconds a phase may wait for its goals before it is cut')
+    parser.add_argument('--security', choices=PROTECTIONS, default=None,
+                        help='every process with DDS Security, everything protected at this kind')
+    parser.add_argument('--network', choices=('count', 'netns'), default='count',
+                        help='clients\' bytes: estimated, or received on their own interfaces')
     parser.add_argument('--output', type=Path, default=None)
     parser.add_argument('--plot', type=Path, default=None, metavar='PNG',
                         help='also draw the rate ratios into this file')
@@ -202,12 +218,13 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
 
 def format_table(points: list[dict[str, Any]]) -> str:
     rows = [('guard', 'size', 'N', 'configuration', 'msgs', 'goals s', 'msgs/s', 'rate x plain',
-             'CPU ms/msg', 'CPU x plain', 'uuid verdicts', 'Fast DDS verdicts')]
+             'CPU ms/msg', 'CPU x plain', 'kB/client', 'bytes x plain', 'uuid verdicts',
+             'Fast DDS verdicts')]
     for point in points:
         for f in point['figures']:
             if 'error' in f:
                 rows.append((point['guard'], point['size'], str(point['clients']),
-                             load.CONFIG_LABELS[f['config']] + ' (failed)', *['-'] * 8))
+                             load.CONFIG_LABELS[f['config']] + ' (failed)', *['-'] * 10))
                 continue
             r = f['ratio_to_plain']
             gf = f['guard_filter']
@@ -216,8 +233,13 @@ def format_table(points: list[dict[str, Any]]) -> str:
                          str(f['published']), fmt(f['goals_s'], '.1f'),
                          fmt(f['rate_msgs_per_s'], '.0f'), fmt(r['rate'], '.2f'),
                          fmt(f['cpu_ms_per_msg'], '.3f'), fmt(r['cpu_per_msg'], '.2f'),
+                         fmt(_kb(f.get('bytes_per_client')), '.1f'), fmt(r.get('bytes'), '.2f'),
                          str(gf.get('uuid_verdicts', '-')), str(gf.get('fastdds_verdicts', '-'))))
     return grid(rows)
+
+
+def _kb(octets: Optional[float]) -> Optional[float]:
+    return None if octets is None else octets / 1000
 
 
 def markdown(points: list[dict[str, Any]]) -> str:
@@ -311,7 +333,10 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         'command': 'python -m benchmarks.server_cost ' + ' '.join(sys.argv[1:] if argv is None
                                                                  else argv),
         'machine': environment_facts(), 'order': order, 'rate_hz': args.rate,
-        'points': []}
+        'security': args.security, 'network': args.network, 'points': []}
+    if args.security:  # inherited by the server and every client (harness.load copies os.environ)
+        keystore = Keystore(Path(tempfile.mkdtemp(prefix='cft-keystore-')), args.security)
+        os.environ.update(keystore.enclave('/cft/bench'))
     total = len(args.guards) * len(args.sizes) * len(args.clients)
     t0 = time.monotonic()
 
@@ -325,7 +350,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 done += 1
                 progress(f'point {done}/{total}: guard {guard_mode}, {size} feedback, N = {n}')
                 spec = load.LoadSpec(clients=n, goals=1, order=order, rate_hz=args.rate,
-                                         pad=SIZES[size], network='count', settle_s=2.0,
+                                         pad=SIZES[size], network=args.network, settle_s=2.0,
                                          guarded=GUARD_MODES[guard_mode][0],
                                          server_env=GUARD_MODES[guard_mode][1])
                 if args.profile:

@@ -24,7 +24,8 @@ every child process by :class:`harness.proc.Proc`. It imports ``cft_action`` and
 - ``crash``: a server that may crash: its environment, its exit and its core; ``hazard``: one cell
   of the hazard matrix (``benchmarks/hazard.py``, the guard's tests);
 - ``cli``: command-line value types (comma-separated lists);
-- ``domain``: a ROS domain that no other process on the host uses;
+- ``domain``: a ROS domain that no other process on the host uses; ``keystore``: an SROS2 keystore
+  and its enclaves (DDS Security);
 - ``ros``: an rclpy session in this process; ``polling``: bounded waits in helper processes;
   ``param_nodes``: nodes whose parameters change on command.
 """

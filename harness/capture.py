@@ -44,17 +44,31 @@ _DATA, _DATA_FRAG = 0x15, 0x16
 _HEARTBEAT, _GAP = 0x07, 0x08
 # HEARTBEAT, GAP, HEARTBEAT_FRAG, ACKNACK and NACK_FRAG carry readerId, then writerId.
 _WRITER_AFTER_READER = (0x07, 0x08, 0x13, 0x06, 0x12)
+# DDS Security's: a submessage protected alone (metadata protection) and a whole message (RTPS
+# protection) begin so; under SIGN the protected submessages follow in clear, under ENCRYPT in a
+# SEC_BODY.
+_SEC_PREFIX, _SRTPS_PREFIX = 0x31, 0x33
+
+
+def _submessages(payload: bytes) -> Iterator[tuple[int, int, bytes]]:
+    """(submessage id, flags, body after its 4-byte header) of each submessage of one RTPS
+    datagram, in order."""
+    offset = 20  # RTPS header: 'RTPS', version, vendor, GUID prefix
+    while offset + 4 <= len(payload):
+        kind, flags = payload[offset], payload[offset + 1]
+        length = struct.unpack('<H' if flags & 1 else '>H', payload[offset + 2:offset + 4])[0]
+        end = offset + 4 + length if length else len(payload)
+        yield kind, flags, payload[offset + 4:end]
+        if length == 0:  # the last submessage extends to the end of the datagram
+            break
+        offset += 4 + length
 
 
 def _writer_ids(payload: bytes) -> list[tuple[int, bytes, bool]]:
     """(submessage id, writer entity id, starts a sample) of each RTPS submessage that names a
     writer; a sample starts with a DATA, or with the DATA_FRAG of its first fragment."""
     found = []
-    offset = 20  # RTPS header: 'RTPS', version, vendor, GUID prefix
-    while offset + 4 <= len(payload):
-        kind, flags = payload[offset], payload[offset + 1]
-        length = struct.unpack('<H' if flags & 1 else '>H', payload[offset + 2:offset + 4])[0]
-        body = payload[offset + 4:offset + 4 + length] if length else payload[offset + 4:]
+    for kind, flags, body in _submessages(payload):
         if kind == _DATA:
             found.append((kind, body[8:12], True))  # extraFlags, octetsToInlineQos, readerId,
         elif kind == _DATA_FRAG:                    # writerId, then writerSN (8 bytes)
@@ -62,9 +76,6 @@ def _writer_ids(payload: bytes) -> list[tuple[int, bytes, bool]]:
             found.append((kind, body[8:12], first))
         elif kind in _WRITER_AFTER_READER:
             found.append((kind, body[4:8], False))
-        if length == 0:  # the last submessage extends to the end of the datagram
-            break
-        offset += 4 + length
     return found
 
 
@@ -78,18 +89,12 @@ def _samples(payload: bytes) -> Iterator[tuple[int, int, str, bytes, bytes, int]
     DATA_FRAG submessage of one RTPS datagram (the body after the submessage's 4-byte header)."""
     if payload[:4] != b'RTPS':
         return
-    prefix, offset = payload[8:20], 20
-    while offset + 4 <= len(payload):
-        kind, flags = payload[offset], payload[offset + 1]
+    prefix = payload[8:20]
+    for kind, flags, body in _submessages(payload):
         order = '<' if flags & 1 else '>'
-        length = struct.unpack(order + 'H', payload[offset + 2:offset + 4])[0]
-        body = payload[offset + 4:offset + 4 + length] if length else payload[offset + 4:]
         if kind in (_DATA, _DATA_FRAG) and len(body) >= 20:
             high, low = struct.unpack(order + 'iI', body[12:20])
             yield kind, flags, order, body, prefix + body[8:12], (high << 32) | low
-        if length == 0:
-            break
-        offset += 4 + length
 
 
 def data_sequence_numbers(payload: bytes) -> list[tuple[bytes, int]]:
@@ -332,6 +337,32 @@ def writer_datagrams_by_port(interface: str, writers: set[bytes], stop: threadin
         else:
             what = 'gap+heartbeat'
         found.setdefault(port, Counter())[what] += 1
+    return found
+
+
+def protected_by_port(interface: str, writers: set[bytes], stop: threading.Event,
+                      listening: threading.Event) -> dict[int, Counter[str]]:
+    """What the participant of ``writers`` sent under DDS Security, received on ``interface``
+    until ``stop`` is set, by UDP destination port (one port per reader's participant):
+    ``datagrams``, and of them ``srtps``, those protected whole (``SRTPS_PREFIX``); ``sec``, the
+    submessages protected one by one (``SEC_PREFIX``) that can be seen (not inside an encrypted
+    message); where the submessages can be seen (signed, not encrypted), ``named``, the datagrams
+    with a submessage of one of ``writers``, and ``samples``, their DATA and first DATA_FRAG. Sets
+    ``listening`` once the socket is bound. Unfragmented IPv4 datagrams only."""
+    prefixes = {writer[:12] for writer in writers}
+    found: dict[int, Counter[str]] = {}
+    for port, payload in _received_udp(interface, stop, listening):
+        if payload[:4] != b'RTPS' or payload[8:20] not in prefixes:
+            continue
+        kinds = [kind for kind, _, _ in _submessages(payload)]
+        seen = found.setdefault(port, Counter())
+        seen['datagrams'] += 1
+        seen['srtps'] += _SRTPS_PREFIX in kinds
+        seen['sec'] += kinds.count(_SEC_PREFIX)
+        named = [starts for _, entity, starts in _writer_ids(payload)
+                 if payload[8:20] + entity in writers]
+        seen['named'] += bool(named)
+        seen['samples'] += sum(named)
     return found
 
 

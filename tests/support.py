@@ -319,15 +319,19 @@ def clients_on_the_wire(clients: Sequence[Sequence[object]], capture: Callable[.
                         writers: Sequence[str] = ('feedback',), *, guarded: bool = True,
                         server_env: Optional[dict] = None, feedback_depth: Optional[int] = None,
                         result_pad: int = 0, together: bool = False,
-                        release_after: Optional[float] = None) -> WireRun:
+                        release_after: Optional[float] = None,
+                        client_envs: Sequence[dict] = ()) -> WireRun:
     """Run a server (guarded or not) and one client process (tests/helpers/fib_client.py) per
     entry of ``clients`` (its arguments after the action: mode, goals, order[, writer_filtering]),
     all on UDP only; capture on loopback with ``capture(interface, {writer GUIDs}, stop,
     listening)`` (from :mod:`harness.capture`, root only) the traffic of the server's ``writers``
     (names of harness.server's STATS ``writers``) while the clients' goals run. ``together``
     starts the clients at once instead of one after another. ``release_after``: the server holds
-    every goal of ``go`` after its first feedback until that many seconds after it."""
+    every goal of ``go`` after its first feedback until that many seconds after it.
+    ``client_envs``: variables of each client's own, in the order of ``clients`` (e.g. its SROS2
+    enclave's, :class:`harness.keystore.Keystore`); ``server_env`` the server's."""
     env = {**os.environ, **UDP_ONLY}
+    own = list(client_envs) or [{}] * len(clients)
     action = '/' + unique_name('cft_wire')
     server_environment = {**env, **(server_env or {})}
     server = action_server(action, 0.01, feedback_depth=feedback_depth, result_pad=result_pad,
@@ -342,9 +346,9 @@ def clients_on_the_wire(clients: Sequence[Sequence[object]], capture: Callable[.
         guids = {bytes.fromhex(named[name][0]) for name in writers}
         # Each client proves its goal service and feedback path before READY; the capture starts
         # after that, so it holds the measured goals' traffic only.
-        processes = [helper_process('tests.helpers.fib_client', [action, *arguments], env=env,
-                                    ready='' if together else 'READY')
-                     for arguments in clients]
+        processes = [helper_process('tests.helpers.fib_client', [action, *arguments],
+                                    env={**env, **extra}, ready='' if together else 'READY')
+                     for arguments, extra in zip(clients, own, strict=True)]
         for process in processes if together else ():
             process.expect('READY', 60)
         sniffer = threading.Thread(target=lambda: captured.update(
