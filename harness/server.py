@@ -45,11 +45,12 @@ goal responses sent, and sends that failed: rclpy logs those and drops the goal,
 dropped because the client's response reader was not matched within 100 ms, which rclpy only
 warns of while the goal runs),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
-``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
-line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and ``guard_filter_class`` (its call,
-filter-verdict, writer-limit and filter-class counters), ``guard_replies`` (its reply filter's)
-and ``writers`` (the GUIDs of the feedback and status writers, and of the ``send_goal``,
-``cancel_goal`` and ``get_result`` reply writers, in hex).
+``cpu_s`` (user + system seconds of this process so far), ``switches`` and ``preempted`` (its
+threads' voluntary and involuntary context switches so far: waits, and preemptions), ``guard``
+(the server guard's status line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and
+``guard_filter_class`` (its call, filter-verdict, writer-limit and filter-class counters),
+``guard_replies`` (its reply filter's) and ``writers`` (the GUIDs of the feedback and status
+writers, and of the ``send_goal``, ``cancel_goal`` and ``get_result`` reply writers, in hex).
 ``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
 by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). ``READERS <json>``
 replies to ``readers``: with ``--record-readers``, per goal UUID in hex, the GIDs (hex) of the
@@ -382,6 +383,7 @@ class TickingServer:
                     'release_reason': self.release_reason, 'maxrss_kb': usage.ru_maxrss,
                     'late_ticks': self.late_ticks, 'intervals': self.intervals,
                     'interval_s': self.interval_s, 'cpu_s': usage.ru_utime + usage.ru_stime,
+                    'switches': usage.ru_nvcsw, 'preempted': usage.ru_nivcsw,
                     'guard': guard.status(), 'guard_calls': guard.call_counts(),
                     'guard_filter': guard.filter_counts(), 'guard_writers': guard.writer_limits(),
                     'guard_filter_class': guard.filter_class_counts(),
