@@ -230,6 +230,10 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                              'even rounds')
     parser.add_argument('--phase-timeout', type=float, default=90.0,
                         help='seconds a phase may wait for its goals before it is cut')
+    parser.add_argument('--drain-timeout', type=float, default=300.0,
+                        help='seconds the clients may take the rest of a phase\'s feedback after '
+                             'its goals (plain clients fall far behind at N = 32); the server\'s '
+                             'figures end at its last goal')
     parser.add_argument('--output', type=Path, default=None)
     parser.add_argument('--plot', type=Path, default=None, metavar='PNG',
                         help='also draw the rate ratios into this file')
@@ -394,6 +398,7 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 progress(f'point {done}/{total}: guard {guard_mode}, {size} feedback, N = {n}')
                 spec = load.LoadSpec(clients=n, goals=1, order=order, rate_hz=args.rate,
                                          pad=SIZES[size], network='count', settle_s=2.0,
+                                         drain_timeout=args.drain_timeout,
                                          guarded=GUARD_MODES[guard_mode][0],
                                          server_env=GUARD_MODES[guard_mode][1])
                 if args.profile:
