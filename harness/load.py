@@ -372,6 +372,9 @@ class LoadRun:
             # the server's context switches (harness.server's stats), go to its last goal
             'server_switches_goals': {k: done[k] - before[k] for k in ('switches', 'preempted')
                                       if k in done},
+            # requests the server took from go to its last goal (an arrival probe's are cancels)
+            'server_requests_goals': {k: done[k] - before[k]
+                                      for k in ('goal_requests', 'cancel_requests') if k in done},
             'timed_out': done.get('timed_out', False),
             **{key: {k: v - before.get(key, {}).get(k, 0) for k, v in after.get(key, {}).items()}
                for key in ('guard_filter', 'guard_heartbeats', 'guard_status')},

@@ -43,7 +43,7 @@ go, or null), ``release_reason``, ``maxrss_kb`` (this process's peak resident se
 ``goal_requests``, ``goal_responses`` and ``goal_response_errors`` (goal requests taken from rcl,
 goal responses sent, and sends that failed: rclpy logs those and drops the goal, or that rmw
 dropped because the client's response reader was not matched within 100 ms, which rclpy only
-warns of while the goal runs),
+warns of while the goal runs), ``cancel_requests`` (cancel requests taken),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
 ``cpu_s`` (user + system seconds of this process so far), ``switches`` and ``preempted`` (its
 threads' voluntary and involuntary context switches so far: waits, and preemptions), ``guard``
@@ -156,7 +156,7 @@ class CountingActionServer(ActionServer):
         # goal request, as GID hex: whether a client's reader was discovered before its goal ran.
         self.readers_at_take: dict[str, list[str]] = {}
         self.counts = {'goal_requests': 0, 'goal_responses': 0, 'goal_response_errors': 0,
-                       'cancel_requests_unanswered': 0}
+                       'cancel_requests': 0, 'cancel_requests_unanswered': 0}
         self._failed_send = threading.local()
         super().__init__(*args, **kwargs)
         self.feedback_topic = self._node.resolve_topic_name(args[2]) + '/_action/feedback'
@@ -186,6 +186,8 @@ class CountingActionServer(ActionServer):
         self._failed_send.value = True
 
     async def _execute_cancel_request(self, request_header_and_message: Any) -> None:
+        with self.request_lock:
+            self.counts['cancel_requests'] += 1
         if not self.mute_cancel:
             await super()._execute_cancel_request(request_header_and_message)
             return
