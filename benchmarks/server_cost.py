@@ -134,6 +134,7 @@ def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
         'cpu_ms_per_msg': summary['server_cpu_ms_per_msg'],
         'waits_per_msg': per_message(phase, 'switches'),
         'preempted_per_msg': per_message(phase, 'preempted'),
+        'server_requests': phase.get('server_requests_goals', {}),
         'clients_cpu_ms_per_msg': (1000 * summary['client_cpu_s'] / phase['published']
                                    if phase['published'] else None),
         'own_per_client': summary['own_per_client'],

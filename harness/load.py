@@ -573,7 +573,10 @@ def pool_phases(phases: list[dict[str, Any]]) -> dict[str, Any]:
     for key, first in summaries[0].items():
         values = [s[key] for s in summaries]
         numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
-        summary[key] = statistics.fmean(values) if numeric else first
+        mean = statistics.fmean(values) if numeric else first
+        # counts stay counts where their mean is whole (filter updates: 0 and 0 are 0, not 0.0)
+        whole = all(isinstance(v, int) for v in values) and float(mean).is_integer()
+        summary[key] = int(mean) if numeric and whole else mean
     total = {k: sum(p[k] for p in phases)
              for k in ('published_at_goals', 'goals_s', 'server_cpu_goals_s', 'intervals',
                        'interval_s')}
