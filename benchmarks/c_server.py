@@ -91,6 +91,7 @@ def run_phase(server: c_server.CServer, config: str, args: argparse.Namespace,
             'server_preempted_per_msg': ((done['preempted'] - before['preempted']) / published
                                          if published else None),
             'late_ticks': done['late_ticks'] - before['late_ticks'],
+            'cancel_requests': done['cancel_requests'] - before['cancel_requests'],
             'own': own, 'foreign': sum(r['foreign'] for r in reports),
             'callbacks': sum(r['callbacks'] for r in reports),
             'client_cpu_s': client_cpu,
