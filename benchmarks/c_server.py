@@ -88,7 +88,10 @@ def run_phase(server: c_server.CServer, config: str, args: argparse.Namespace,
     return {'config': config, 'published': published, 'goals_s': goals_s,
             'server_cpu_s': server_cpu,
             'server_cpu_per_msg_us': 1e6 * server_cpu / published if published else None,
+            'server_preempted_per_msg': ((done['preempted'] - before['preempted']) / published
+                                         if published else None),
             'late_ticks': done['late_ticks'] - before['late_ticks'],
+            'cancel_requests': done['cancel_requests'] - before['cancel_requests'],
             'own': own, 'foreign': sum(r['foreign'] for r in reports),
             'callbacks': sum(r['callbacks'] for r in reports),
             'client_cpu_s': client_cpu,
@@ -110,16 +113,14 @@ def run_point(guard_mode: str, size: str, args: argparse.Namespace) -> dict[str,
                             pad=SIZES[size], depth='all')
     phases = []
     try:
-        for round_index in range(args.rounds):
-            order = CONFIGS if round_index % 2 == 0 else tuple(reversed(CONFIGS))
-            for config in order:
-                say(f'  {guard_mode}, {size}, round {round_index + 1}: {LABELS[config]}')
-                phase = run_phase(server, config, args, env)
-                say(f'    server {fmt(phase["server_cpu_per_msg_us"], ".1f")} µs/msg over '
-                    f'{phase["published"]} messages; clients '
-                    f'{fmt(phase["client_cpu_per_own_msg_us"], ".0f")} µs per own message')
-                phases.append({**phase, 'round': round_index + 1})
-                time.sleep(1.0)  # let discovery retire this phase's readers
+        for round_number, config in load.round_order(CONFIGS, args.rounds):
+            say(f'  {guard_mode}, {size}, round {round_number}: {LABELS[config]}')
+            phase = run_phase(server, config, args, env)
+            say(f'    server {fmt(phase["server_cpu_per_msg_us"], ".1f")} µs/msg over '
+                f'{phase["published"]} messages; clients '
+                f'{fmt(phase["client_cpu_per_own_msg_us"], ".0f")} µs per own message')
+            phases.append({**phase, 'round': round_number})
+            time.sleep(1.0)  # let discovery retire this phase's readers
         status = server.all('STATUS')
     finally:
         server.stop()
@@ -129,7 +130,7 @@ def run_point(guard_mode: str, size: str, args: argparse.Namespace) -> dict[str,
 
 def mean_of(point: dict[str, Any], config: str, key: str) -> Optional[float]:
     """The mean of ``key`` over ``point``'s phases of ``config``."""
-    values = [p[key] for p in point['phases'] if p['config'] == config and p[key] is not None]
+    values = [p[key] for p in point['phases'] if p['config'] == config and p.get(key) is not None]
     return statistics.fmean(values) if values else None
 
 
@@ -140,7 +141,8 @@ def ratio(value: Optional[float], reference: Optional[float]) -> Optional[float]
 def table_rows(points: list[dict[str, Any]]) -> list[list[str]]:
     """Header and rows: per point, both configurations' CPU per message and their ratios."""
     rows = [['guard', 'size', 'server µs/msg plain', 'server µs/msg filtered',
-             'server filtered/plain', 'client µs/own msg plain', 'client µs/own msg filtered',
+             'server filtered/plain', 'preempted/msg plain', 'preempted/msg filtered',
+             'client µs/own msg plain', 'client µs/own msg filtered',
              'client filtered/plain', 'foreign taken plain', 'foreign taken filtered']]
     for point in points:
         plain = mean_of(point, 'rclpy', 'server_cpu_per_msg_us')
@@ -148,7 +150,10 @@ def table_rows(points: list[dict[str, Any]]) -> list[list[str]]:
         plain_client = mean_of(point, 'rclpy', 'client_cpu_per_own_msg_us')
         filtered_client = mean_of(point, 'client', 'client_cpu_per_own_msg_us')
         rows.append([point['guard'], point['size'], fmt(plain, '.1f'), fmt(filtered, '.1f'),
-                     fmt(ratio(filtered, plain), '.2f'), fmt(plain_client, '.0f'),
+                     fmt(ratio(filtered, plain), '.2f'),
+                     fmt(mean_of(point, 'rclpy', 'server_preempted_per_msg'), '.2f'),
+                     fmt(mean_of(point, 'client', 'server_preempted_per_msg'), '.2f'),
+                     fmt(plain_client, '.0f'),
                      fmt(filtered_client, '.0f'), fmt(ratio(filtered_client, plain_client), '.2f'),
                      fmt(mean_of(point, 'rclpy', 'foreign')),
                      fmt(mean_of(point, 'client', 'foreign'))])

@@ -18,8 +18,15 @@ Three guard modes, each with its own servers:
 - ``locking``: the same guard with ``CFT_GUARD_ACCELERATE=0``: only the locks, so Fast DDS
   deserializes every sample once per filtered reader, as an unguarded server does.
 
+With ``--rounds R`` each server runs every configuration R times, in the given order in odd rounds
+and reversed in even ones (plain, cft, cft, plain, ...), so that a drift of the machine's load over
+the point weighs on both alike; each phase is compared with the plain phase of its round, and the
+tables give the medians over the rounds. Every phase also counts the server's context switches per
+message (``getrusage``): ``waits`` (voluntary) and ``preempted`` (involuntary: a thread that became
+runnable, such as a client's receive thread woken by a datagram, took the CPU).
+
 A phase whose goals do not finish within ``--phase-timeout`` seconds is cut there; its rate is what
-was published until then, and the rest of that point's configurations run against a fresh server.
+was published until then, and the rest of that point's phases run against a fresh server.
 ``--security ENCRYPT`` (or ``SIGN``) runs every process with DDS Security (SROS2), Enforce, in one
 enclave of a keystore made for the run (:class:`harness.keystore.Keystore`), whose governance
 protects discovery, liveliness, whole messages, submessages and payloads at that kind: plain rclpy
@@ -31,6 +38,8 @@ Results (machine, date, command, every raw figure) go to
 ``docs/img/server_cost.png``. Run from the repository's root::
 
     python -m benchmarks.server_cost --sizes 36B,1k,10k --clients 1,4,16,32
+    python -m benchmarks.server_cost --guards unguarded --configs rclpy,client --rounds 6 \\
+        --sizes 36B,1k --clients 8,32 --duration 3
 """
 
 from __future__ import annotations
@@ -41,6 +50,7 @@ import json
 import os
 import platform
 import signal
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -110,6 +120,14 @@ def _perf_rows(report: str) -> list[str]:
             if line.strip() and not line.startswith('#')]
 
 
+def per_message(phase: dict[str, Any], counter: str) -> Optional[float]:
+    """The server's context switches of kind ``counter`` over the phase's goals, per message."""
+    count = phase.get('server_switches_goals', {}).get(counter)
+    if count is None or not phase['published_at_goals']:
+        return None
+    return count / phase['published_at_goals']
+
+
 def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
     """Rate and CPU per message of one phase, from the server's counters at its last goal."""
     summary = phase['summary']
@@ -122,6 +140,11 @@ def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
         'rate_per_goal_hz': summary['achieved_rate_hz'],
         'server_cpu_s': phase['server_cpu_goals_s'],
         'cpu_ms_per_msg': summary['server_cpu_ms_per_msg'],
+        'waits_per_msg': per_message(phase, 'switches'),
+        'preempted_per_msg': per_message(phase, 'preempted'),
+        'server_requests': phase.get('server_requests_goals', {}),
+        'clients_cpu_ms_per_msg': (1000 * summary['client_cpu_s'] / phase['published']
+                                   if phase['published'] else None),
         'own_per_client': summary['own_per_client'],
         'bytes_per_client': summary['bytes_per_client'],
         'bytes_method': summary['bytes_method'],
@@ -132,11 +155,12 @@ def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
 
 
 def run_point(spec: load.LoadSpec, configs: Sequence[str], timeout: float,
-              progress: load.Progress, profile_dir: Optional[Path] = None
+              progress: load.Progress, profile_dir: Optional[Path] = None, rounds: int = 1
               ) -> list[dict[str, Any]]:
-    """Run ``configs`` under ``spec``; a fresh server after any phase that was cut."""
+    """Run ``configs`` under ``spec``, ``rounds`` times; a fresh server after any phase that was
+    cut. Each phase's ratios refer to the plain phase of its round."""
     figures: list[dict[str, Any]] = []
-    pending = list(configs)
+    pending = load.round_order(configs, rounds)
     while pending:
         run = CappedRun(spec, progress) if profile_dir is None else ProfiledRun(spec, progress)
         run.phase_timeout = timeout
@@ -144,30 +168,57 @@ def run_point(spec: load.LoadSpec, configs: Sequence[str], timeout: float,
             run.profile_dir = profile_dir
         try:
             while pending:
-                config = pending.pop(0)
+                round_number, config = pending.pop(0)
                 try:
                     phase = run.run_phase(config)
                 except (TimeoutError, RuntimeError) as failure:  # a client or the server failed
                     progress(f'    {config} failed: {str(failure).splitlines()[0]}')
-                    figures.append({'config': config, 'error': str(failure)[:2000]})
+                    figures.append({'config': config, 'round': round_number,
+                                    'error': str(failure)[:2000]})
                     break
-                figures.append(phase_figures(phase))
+                figures.append({**phase_figures(phase), 'round': round_number})
                 if phase['timed_out']:
                     progress(f'    cut after {timeout:.0f} s: {phase["published_at_goals"]} '
                              'published; next configuration on a fresh server')
                     break
         finally:
             run.close()
-    plain = next((f for f in figures if f['config'] == 'rclpy'), None)
     for f in figures:
         if 'error' in f:
             continue
+        plain = next((p for p in figures if p['config'] == 'rclpy' and 'error' not in p
+                      and p['round'] == f['round']), None)
         f['ratio_to_plain'] = {
             'rate': ratio(f['rate_msgs_per_s'], plain and plain['rate_msgs_per_s']),
             'cpu_per_msg': ratio(f['cpu_ms_per_msg'], plain and plain['cpu_ms_per_msg']),
             'bytes': ratio(f['bytes_per_client'], plain and plain['bytes_per_client']),
         }
     return figures
+
+
+def _median(values: Sequence[Optional[float]]) -> Optional[float]:
+    present = [v for v in values if v is not None]
+    return statistics.median(present) if present else None
+
+
+def medians(figures: list[dict[str, Any]]) -> dict[str, dict[str, Any]]:
+    """Per configuration, the medians of its phases' figures over the rounds, their ratios to
+    plain's medians, and each round's CPU ratio (``round_cpu_ratios``)."""
+    out: dict[str, dict[str, Any]] = {}
+    for config in dict.fromkeys(f['config'] for f in figures):
+        mine = [f for f in figures if f['config'] == config and 'error' not in f]
+        out[config] = {
+            'phases': len(mine), 'cut': sum(f['timed_out'] for f in mine),
+            **{key: _median([f[key] for f in mine])
+               for key in ('rate_msgs_per_s', 'cpu_ms_per_msg', 'waits_per_msg',
+                           'preempted_per_msg', 'clients_cpu_ms_per_msg')},
+            'round_cpu_ratios': [f['ratio_to_plain']['cpu_per_msg'] for f in mine]}
+    plain = out.get('rclpy', {})
+    for m in out.values():
+        m['ratio_to_plain'] = {'rate': ratio(m['rate_msgs_per_s'], plain.get('rate_msgs_per_s')),
+                               'cpu_per_msg': ratio(m['cpu_ms_per_msg'],
+                                                    plain.get('cpu_ms_per_msg'))}
+    return out
 
 
 def ratio(value: Optional[float], reference: Optional[float]) -> Optional[float]:
@@ -186,12 +237,19 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--rate', type=float, default=100.0, help='feedback Hz per goal')
     parser.add_argument('--duration', type=float, default=2.0,
                         help='nominal seconds of feedback per goal')
+    parser.add_argument('--rounds', type=int, default=1,
+                        help='phases of each configuration per server, the order reversed in '
+                             'even rounds')
     parser.add_argument('--phase-timeout', type=float, default=90.0,
                         help='seconds a phase may wait for its goals before it is cut')
     parser.add_argument('--security', choices=PROTECTIONS, default=None,
                         help='every process with DDS Security, everything protected at this kind')
     parser.add_argument('--network', choices=('count', 'netns'), default='count',
                         help='clients\' bytes: estimated, or received on their own interfaces')
+    parser.add_argument('--drain-timeout', type=float, default=300.0,
+                        help='seconds the clients may take the rest of a phase\'s feedback after '
+                             'its goals (plain clients fall far behind at N = 32); the server\'s '
+                             'figures end at its last goal')
     parser.add_argument('--output', type=Path, default=None)
     parser.add_argument('--plot', type=Path, default=None, metavar='PNG',
                         help='also draw the rate ratios into this file')
@@ -217,22 +275,23 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
 
 
 def format_table(points: list[dict[str, Any]]) -> str:
-    rows = [('guard', 'size', 'N', 'configuration', 'msgs', 'goals s', 'msgs/s', 'rate x plain',
-             'CPU ms/msg', 'CPU x plain', 'kB/client', 'bytes x plain', 'uuid verdicts',
-             'Fast DDS verdicts')]
+    rows = [('guard', 'size', 'N', 'round', 'configuration', 'msgs', 'goals s', 'msgs/s',
+             'rate x plain', 'CPU ms/msg', 'CPU x plain', 'waits/msg', 'preempted/msg',
+             'kB/client', 'bytes x plain', 'uuid verdicts', 'Fast DDS verdicts')]
     for point in points:
         for f in point['figures']:
+            head = (point['guard'], point['size'], str(point['clients']), str(f.get('round', 1)))
             if 'error' in f:
-                rows.append((point['guard'], point['size'], str(point['clients']),
-                             load.CONFIG_LABELS[f['config']] + ' (failed)', *['-'] * 10))
+                rows.append((*head, load.CONFIG_LABELS[f['config']] + ' (failed)', *['-'] * 12))
                 continue
             r = f['ratio_to_plain']
             gf = f['guard_filter']
-            rows.append((point['guard'], point['size'], str(point['clients']),
-                         load.CONFIG_LABELS[f['config']] + (' (cut)' if f['timed_out'] else ''),
+            label = load.CONFIG_LABELS[f['config']] + (' (cut)' if f['timed_out'] else '')
+            rows.append((*head, label,
                          str(f['published']), fmt(f['goals_s'], '.1f'),
                          fmt(f['rate_msgs_per_s'], '.0f'), fmt(r['rate'], '.2f'),
                          fmt(f['cpu_ms_per_msg'], '.3f'), fmt(r['cpu_per_msg'], '.2f'),
+                         fmt(f.get('waits_per_msg'), '.2f'), fmt(f.get('preempted_per_msg'), '.2f'),
                          fmt(_kb(f.get('bytes_per_client')), '.1f'), fmt(r.get('bytes'), '.2f'),
                          str(gf.get('uuid_verdicts', '-')), str(gf.get('fastdds_verdicts', '-'))))
     return grid(rows)
@@ -242,34 +301,46 @@ def _kb(octets: Optional[float]) -> Optional[float]:
     return None if octets is None else octets / 1000
 
 
+def _range(values: list[Optional[float]]) -> str:
+    present = [v for v in values if v is not None]
+    return f' ({min(present):.2f}-{max(present):.2f})' if len(present) > 1 else ''
+
+
 def markdown(points: list[dict[str, Any]]) -> str:
-    """One Markdown table per guard mode: rate and CPU per message as ratios to plain rclpy."""
+    """One Markdown table per guard mode: rate and CPU per message as ratios to plain rclpy, the
+    medians over the rounds (with the range of the rounds' CPU ratios when there are several)."""
     out = []
     for guard_mode in GUARD_MODES:
         mine = [p for p in points if p['guard'] == guard_mode]
         if not mine:
             continue
-        configs = [f['config'] for f in mine[0]['figures'] if f['config'] != 'rclpy']
-        head = ['feedback', 'N', 'plain: msgs/s, CPU ms/msg']
-        head += [f'{load.CONFIG_LABELS[c]}: rate, CPU/msg' for c in configs]
+        configs = [c for c in dict.fromkeys(f['config'] for f in mine[0]['figures'])
+                   if c != 'rclpy']
+        head = ['feedback', 'N', 'plain: msgs/s, CPU ms/msg, preempted/msg']
+        head += [f'{load.CONFIG_LABELS[c]}: rate, CPU/msg, preempted/msg' for c in configs]
         out += [f'Guard {guard_mode}: ratios to plain rclpy (rate: higher is better; CPU per '
-                'message: lower is better; "cut": the goals had not finished after the phase '
-                'timeout, the rate is what was published until then)', '']
+                'message: lower is better; medians over the rounds, and the range of the rounds\' '
+                'CPU ratios; preempted/msg: the server\'s involuntary context switches per '
+                'message; "cut": the goals had not finished after the phase timeout, the rate is '
+                'what was published until then)', '']
         rows = []
         for p in mine:
-            by = {f['config']: f for f in p['figures']}
+            by = p.get('medians') or medians(p['figures'])
             plain = by.get('rclpy', {})
             row = [f"{p['size']} ({p['feedback_bytes']} B)", str(p['clients']),
                    f"{fmt(plain.get('rate_msgs_per_s'), '.0f')}, "
-                   f"{fmt(plain.get('cpu_ms_per_msg'), '.3f')}"]
+                   f"{fmt(plain.get('cpu_ms_per_msg'), '.3f')}, "
+                   f"{fmt(plain.get('preempted_per_msg'), '.2f')}"]
             for c in configs:
-                f = by.get(c)
-                if f is None or 'error' in f:
-                    row.append('failed' if f else '-')
+                m = by.get(c)
+                if not m or not m['phases']:
+                    row.append('failed' if m else '-')
                     continue
-                r = f['ratio_to_plain']
+                r = m['ratio_to_plain']
                 row.append(f"{fmt(r['rate'], '.2f')}, {fmt(r['cpu_per_msg'], '.2f')}"
-                           + (' (cut)' if f['timed_out'] else ''))
+                           f"{_range(m['round_cpu_ratios'])}, "
+                           f"{fmt(m.get('preempted_per_msg'), '.2f')}"
+                           + (' (cut)' if m['cut'] else ''))
             rows.append(row)
         out += [*markdown_table(head, rows), '']
     return '\n'.join(out)
@@ -351,15 +422,17 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                 progress(f'point {done}/{total}: guard {guard_mode}, {size} feedback, N = {n}')
                 spec = load.LoadSpec(clients=n, goals=1, order=order, rate_hz=args.rate,
                                          pad=SIZES[size], network=args.network, settle_s=2.0,
+                                         drain_timeout=args.drain_timeout,
                                          guarded=GUARD_MODES[guard_mode][0],
                                          server_env=GUARD_MODES[guard_mode][1])
                 if args.profile:
                     args.profile.mkdir(parents=True, exist_ok=True)
                 figures = run_point(spec, args.configs, args.phase_timeout, progress,
-                                    args.profile)
+                                    args.profile, args.rounds)
                 result['points'].append({'guard': guard_mode, 'size': size, 'clients': n,
                                          'feedback_bytes': load.feedback_size(SIZES[size]),
-                                         'figures': figures})
+                                         'figures': figures, 'medians': medians(figures),
+                                         'load_average': os.getloadavg()})
                 output.parent.mkdir(parents=True, exist_ok=True)
                 output.write_text(json.dumps(result, indent=1))
                 print(format_table(result['points'][-1:]), flush=True)

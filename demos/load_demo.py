@@ -4,11 +4,14 @@ One Fibonacci action server process, under the server guard, and N client proces
 goals with feedback at once; three configurations run one after another under the same load: plain
 ``rclpy.action.ActionClient``, ``cft_action.ActionClient`` in ``client`` mode, and in ``goals``
 mode. Then a second server, **without** the guard (the server of someone who only changed a client's
-import), serves ``client`` mode under the same load: it filters nothing, and the clients' own DDS
-readers drop other goals' feedback. For each it prints, per client process, the feedback messages
-taken from rcl (own and foreign), the bytes received, the client CPU seconds, the filter updates and
-the latency from the server's publish to the user callback, with ratios to plain; then it writes a
-PNG plot and a JSON file with every raw figure, and prints their paths.
+import), serves plain rclpy and ``client`` mode under the same load, alternating, twice each
+(plain, cft, cft, plain): it filters nothing, and the clients' own DDS readers drop other goals'
+feedback. Its rows pool each configuration's two phases and refer to its own plain phases, so that
+its server's CPU per message compares the clients, not two processes. For each it prints, per
+client process, the feedback messages taken from rcl (own and foreign), the bytes received, the
+client CPU seconds, the filter updates and the latency from the server's publish to the user
+callback, with ratios to plain; then it writes a PNG plot and a JSON file with every raw figure,
+and prints their paths.
 
 Bytes are real network bytes when network namespaces can be made (root and iproute2): every client
 then has a namespace and an interface of its own. Otherwise they are estimated from the message
@@ -56,9 +59,13 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                         help='int32 elements added to each feedback message (2500: 10 kB)')
     parser.add_argument('--configs', default='rclpy,client,goals',
                         help='comma-separated, from: ' + ', '.join(load.CONFIG_LABELS))
-    parser.add_argument('--unguarded', default='client',
+    parser.add_argument('--unguarded', default='rclpy,client',
                         help='comma-separated configurations run after them against a second '
-                             'server without the guard (empty: none)')
+                             'server without the guard (empty: none); its ratios refer to its '
+                             'own plain rclpy phases, when it runs them')
+    parser.add_argument('--unguarded-rounds', type=int, default=2,
+                        help='phases of each configuration on the unguarded server, the order '
+                             'reversed in even rounds, pooled in its rows')
     parser.add_argument('--network', choices=('auto', 'netns', 'count'), default='auto',
                         help='bytes from per-client network namespaces (auto: when possible) or '
                              'estimated from message counts')
@@ -95,9 +102,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
         progress('a second server, without the guard: '
                  + ', '.join(load.CONFIG_LABELS[c] for c in args.unguarded))
         unguarded = load.run_load(dataclasses.replace(spec, guarded=False), args.unguarded,
-                                  progress)
+                                  progress, rounds=args.unguarded_rounds)
         result['phases'] += unguarded['phases']
-        load.add_ratios(result['phases'])  # against the guarded server's plain rclpy phase
+        result['unguarded_round_phases'] = unguarded.get('round_phases', [])
     result['machine'] = machine
     result['load_average_at_end'] = os.getloadavg()
     result['elapsed_s'] = time.monotonic() - started

@@ -369,6 +369,12 @@ class LoadRun:
             'server_cpu_s': after['cpu_s'] - before['cpu_s'],
             'server_cpu_goals_s': done['cpu_s'] - before['cpu_s'],
             'published_at_goals': done['published'] - before['published'],
+            # the server's context switches (harness.server's stats), go to its last goal
+            'server_switches_goals': {k: done[k] - before[k] for k in ('switches', 'preempted')
+                                      if k in done},
+            # requests the server took from go to its last goal (an arrival probe's are cancels)
+            'server_requests_goals': {k: done[k] - before[k]
+                                      for k in ('goal_requests', 'cancel_requests') if k in done},
             'timed_out': done.get('timed_out', False),
             **{key: {k: v - before.get(key, {}).get(k, 0) for k, v in after.get(key, {}).items()}
                for key in ('guard_filter', 'guard_heartbeats', 'guard_status')},
@@ -551,19 +557,59 @@ def add_ratios(phases: list[dict[str, Any]]) -> None:
                                for name, k in keys.items()}
 
 
+def round_order(configs: Sequence[str], rounds: int) -> list[tuple[int, str]]:
+    """(round, configuration) in the order they run: ``configs`` in odd rounds, reversed in even
+    ones (plain, cft, cft, plain, ...), so that a drift of the machine's load over a run weighs on
+    every configuration alike."""
+    return [(r + 1, c) for r in range(rounds) for c in (configs if r % 2 == 0 else configs[::-1])]
+
+
+def pool_phases(phases: list[dict[str, Any]]) -> dict[str, Any]:
+    """Several phases of one configuration against one server, as one phase: the server's rate,
+    CPU per message and achieved rate over all of them (its counters added up), every other figure
+    of the summary the mean of the phases' (of each phase's percentiles, too)."""
+    summaries = [p['summary'] for p in phases]
+    summary: dict[str, Any] = {}
+    for key, first in summaries[0].items():
+        values = [s[key] for s in summaries]
+        numeric = all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in values)
+        mean = statistics.fmean(values) if numeric else first
+        # counts stay counts where their mean is whole (filter updates: 0 and 0 are 0, not 0.0)
+        whole = all(isinstance(v, int) for v in values) and float(mean).is_integer()
+        summary[key] = int(mean) if numeric and whole else mean
+    total = {k: sum(p[k] for p in phases)
+             for k in ('published_at_goals', 'goals_s', 'server_cpu_goals_s', 'intervals',
+                       'interval_s')}
+    summary['server_msgs_per_s'] = (total['published_at_goals'] / total['goals_s']
+                                    if total['goals_s'] else None)
+    summary['server_cpu_ms_per_msg'] = (1000 * total['server_cpu_goals_s']
+                                        / total['published_at_goals']
+                                        if total['published_at_goals'] else None)
+    summary['achieved_rate_hz'] = (total['intervals'] / total['interval_s']
+                                   if total['interval_s'] else None)
+    return {**phases[0], **total, 'summary': summary, 'pooled_phases': len(phases)}
+
+
 def run_load(spec: LoadSpec, configs: Sequence[str], progress: Progress = print,
-             run_class: type['LoadRun'] = LoadRun) -> dict[str, Any]:
-    """Run ``configs`` one after another under the load ``spec`` against one server."""
+             run_class: type['LoadRun'] = LoadRun, rounds: int = 1) -> dict[str, Any]:
+    """Run ``configs`` under the load ``spec`` against one server, ``rounds`` times
+    (:func:`round_order`). With several rounds, ``phases`` holds one phase per configuration,
+    pooled over its rounds (:func:`pool_phases`), and ``round_phases`` every phase as it ran."""
     run = run_class(spec, progress)
     try:
         progress(f'server ready ({run.network_note})')
-        phases = [run.run_phase(config) for config in configs]
+        ran = [run.run_phase(config) for _, config in round_order(configs, rounds)]
     finally:
         run.close()
+    phases = ran if rounds == 1 else [pool_phases([p for p in ran if p['config'] == c])
+                                      for c in configs]
     add_ratios(phases)
-    return {'spec': dataclasses.asdict(spec), 'queue_depth': run.depth,
-            'bytes_method': run.bytes_method, 'network_note': run.network_note,
-            'domain_id': run.env['ROS_DOMAIN_ID'], 'phases': phases}
+    result = {'spec': dataclasses.asdict(spec), 'queue_depth': run.depth,
+              'bytes_method': run.bytes_method, 'network_note': run.network_note,
+              'domain_id': run.env['ROS_DOMAIN_ID'], 'phases': phases}
+    if rounds > 1:
+        result['round_phases'] = ran
+    return result
 
 
 # --- presentation ---------------------------------------------------------------------------------
@@ -607,4 +653,10 @@ def format_table(result: dict[str, Any]) -> str:
              'feedback per second per goal that the server achieved; srv msg/s and srv ms/msg = '
              'feedback the server published per second, and its CPU milliseconds per message, '
              'from go until its last goal finished']
+    pooled = [p for p in result['phases'] if p.get('pooled_phases', 1) > 1]
+    if pooled:
+        notes.append(f"note: {', '.join(phase_label(p) for p in pooled)}: "
+                     f"{pooled[0]['pooled_phases']} phases each against one server, alternating, "
+                     'pooled (the server\'s figures over all of them, the others their mean); '
+                     'ratios to the plain rclpy phases of the same server')
     return '\n'.join([header, grid(rows), '', grid(ratio_rows), *notes])

@@ -43,14 +43,15 @@ go, or null), ``release_reason``, ``maxrss_kb`` (this process's peak resident se
 ``goal_requests``, ``goal_responses`` and ``goal_response_errors`` (goal requests taken from rcl,
 goal responses sent, and sends that failed: rclpy logs those and drops the goal, or that rmw
 dropped because the client's response reader was not matched within 100 ms, which rclpy only
-warns of while the goal runs),
+warns of while the goal runs), ``cancel_requests`` (cancel requests taken),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
-``cpu_s`` (user + system seconds of this process so far), ``guard`` (the server guard's status
-line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and ``guard_filter_class`` (its call,
-filter-verdict, writer-limit and filter-class counters), ``guard_replies`` (its reply filter's),
-``guard_prefilter`` (its Fast DDS 3 layer's state, :func:`cft_action.guard.prefilter`) and
-``writers`` (the GUIDs of the feedback and status writers, and of the ``send_goal``,
-``cancel_goal`` and ``get_result`` reply writers, in hex).
+``cpu_s`` (user + system seconds of this process so far), ``switches`` and ``preempted`` (its
+threads' voluntary and involuntary context switches so far: waits, and preemptions), ``guard``
+(the server guard's status line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and
+``guard_filter_class`` (its call, filter-verdict, writer-limit and filter-class counters),
+``guard_replies`` (its reply filter's), ``guard_prefilter`` (its Fast DDS 3 layer's state,
+:func:`cft_action.guard.prefilter`) and ``writers`` (the GUIDs of the feedback and status
+writers, and of the ``send_goal``, ``cancel_goal`` and ``get_result`` reply writers, in hex).
 ``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
 by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). ``READERS <json>``
 replies to ``readers``: with ``--record-readers``, per goal UUID in hex, the GIDs (hex) of the
@@ -156,7 +157,7 @@ class CountingActionServer(ActionServer):
         # goal request, as GID hex: whether a client's reader was discovered before its goal ran.
         self.readers_at_take: dict[str, list[str]] = {}
         self.counts = {'goal_requests': 0, 'goal_responses': 0, 'goal_response_errors': 0,
-                       'cancel_requests_unanswered': 0}
+                       'cancel_requests': 0, 'cancel_requests_unanswered': 0}
         self._failed_send = threading.local()
         super().__init__(*args, **kwargs)
         self.feedback_topic = self._node.resolve_topic_name(args[2]) + '/_action/feedback'
@@ -186,6 +187,8 @@ class CountingActionServer(ActionServer):
         self._failed_send.value = True
 
     async def _execute_cancel_request(self, request_header_and_message: Any) -> None:
+        with self.request_lock:
+            self.counts['cancel_requests'] += 1
         if not self.mute_cancel:
             await super()._execute_cancel_request(request_header_and_message)
             return
@@ -383,6 +386,7 @@ class TickingServer:
                     'release_reason': self.release_reason, 'maxrss_kb': usage.ru_maxrss,
                     'late_ticks': self.late_ticks, 'intervals': self.intervals,
                     'interval_s': self.interval_s, 'cpu_s': usage.ru_utime + usage.ru_stime,
+                    'switches': usage.ru_nvcsw, 'preempted': usage.ru_nivcsw,
                     'guard': guard.status(), 'guard_calls': guard.call_counts(),
                     'guard_filter': guard.filter_counts(), 'guard_writers': guard.writer_limits(),
                     'guard_filter_class': guard.filter_class_counts(),

@@ -76,3 +76,29 @@ def test_estimated_bytes_follow_the_counts(result):
     assert filtered['ratio_to_plain']['bytes'] == pytest.approx(1 / CLIENTS)
     assert filtered['bytes_to_own_feedback'] == pytest.approx(1.0)
     assert plain['bytes_to_own_feedback'] == pytest.approx(CLIENTS)
+
+
+def test_rounds_alternate_the_configurations():
+    """Plain first, then the order reversed in every even round (``make demo``'s unguarded
+    server, ``benchmarks.server_cost --rounds``)."""
+    assert load.round_order(['rclpy', 'client'], 3) == [
+        (1, 'rclpy'), (1, 'client'), (2, 'client'), (2, 'rclpy'), (3, 'rclpy'), (3, 'client')]
+
+
+def test_pooled_phases_put_the_servers_counters_together():
+    """A configuration's phases against one server, as one: CPU per message and rate over the
+    phases' counters added up (not the mean of their ratios); the clients' figures averaged."""
+    def ran(published: int, goals_s: float, cpu_s: float, own: float) -> dict:
+        return {'config': 'client', 'published_at_goals': published, 'goals_s': goals_s,
+                'server_cpu_goals_s': cpu_s, 'intervals': published, 'interval_s': goals_s,
+                'summary': {'own_per_client': own, 'latency_p50_ms': None, 'bytes_method': 'x',
+                            'server_cpu_ms_per_msg': 1000 * cpu_s / published}}
+
+    pooled = load.pool_phases([ran(1000, 2.0, 0.1, 10), ran(3000, 2.0, 0.5, 20)])
+    summary = pooled['summary']
+    assert pooled['pooled_phases'] == 2 and pooled['published_at_goals'] == 4000
+    assert summary['server_cpu_ms_per_msg'] == pytest.approx(0.15)
+    assert summary['server_msgs_per_s'] == pytest.approx(1000)
+    assert summary['achieved_rate_hz'] == pytest.approx(1000)
+    assert summary['own_per_client'] == 15
+    assert summary['latency_p50_ms'] is None and summary['bytes_method'] == 'x'

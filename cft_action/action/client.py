@@ -82,8 +82,12 @@ SERVICE_QUEUE_DEPTH = 1000
 ARRIVAL_POLL_PERIOD = 0.01
 
 #: Seconds between polls of the proof that goes on in the background after one timed out, while
-#: goals are sent without holds: the probe's resend interval (``PROBE_MAX_RESEND_S``) by then.
-BACKGROUND_PROOF_POLL_PERIOD = 0.5
+#: goals are sent without holds; each poll resends the probe's request while it is unanswered. A
+#: server that has not matched the probe's response reader takes the request, runs its cancel
+#: callback and drops the reply after waiting up to 100 ms for the match (rmw_fastrtps), in its
+#: executor: at 0.5 s, 32 clients whose proofs timed out sent an unguarded rclpy server 313
+#: requests during 27 s of feedback (docs/BENCHMARKS.md, "The unguarded server's CPU").
+BACKGROUND_PROOF_POLL_PERIOD = 5.0
 
 
 def _deep_service_queues(kwargs: dict[str, Any]) -> dict[str, Any]:

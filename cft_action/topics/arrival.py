@@ -39,7 +39,9 @@ GUID_PREFIX_LEN = 12
 #: matched its response reader drops the reply. The client sees the server's endpoints at once,
 #: the server sees the client's a discovery round later, so the first request is often dropped,
 #: while a held goal request waits for the reply: the interval starts short and doubles. A
-#: repeated request is harmless.
+#: repeated request is answered as the first (a server that has not matched the response reader
+#: yet waits up to 100 ms for it in rmw_fastrtps, then drops the reply), so its owner bounds how
+#: long a proof is polled this often.
 PROBE_FIRST_RESEND_S = 0.02
 PROBE_MAX_RESEND_S = 0.5
 

@@ -615,6 +615,7 @@ static void print_stats(void) {
       (double)usage.ru_utime.tv_sec + (double)usage.ru_utime.tv_usec * 1e-6 +
           (double)usage.ru_stime.tv_sec + (double)usage.ru_stime.tv_usec * 1e-6,
       usage.ru_maxrss, seconds_since(&started));
+  put(&b, "\"switches\":%ld,\"preempted\":%ld,", usage.ru_nvcsw, usage.ru_nivcsw);
   put_guard(&b);
   put(&b, "}");
   emit(&b);
