@@ -277,7 +277,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
 def format_table(points: list[dict[str, Any]]) -> str:
     rows = [('guard', 'size', 'N', 'round', 'configuration', 'msgs', 'goals s', 'msgs/s',
              'rate x plain', 'CPU ms/msg', 'CPU x plain', 'waits/msg', 'preempted/msg',
-             'kB/client', 'bytes x plain', 'uuid verdicts', 'Fast DDS verdicts')]
+             'kB/client', 'bytes x plain', 'guard verdicts', 'Fast DDS verdicts')]
     for point in points:
         for f in point['figures']:
             head = (point['guard'], point['size'], str(point['clients']), str(f.get('round', 1)))
@@ -293,8 +293,16 @@ def format_table(points: list[dict[str, Any]]) -> str:
                          fmt(f['cpu_ms_per_msg'], '.3f'), fmt(r['cpu_per_msg'], '.2f'),
                          fmt(f.get('waits_per_msg'), '.2f'), fmt(f.get('preempted_per_msg'), '.2f'),
                          fmt(_kb(f.get('bytes_per_client')), '.1f'), fmt(r.get('bytes'), '.2f'),
-                         str(gf.get('uuid_verdicts', '-')), str(gf.get('fastdds_verdicts', '-'))))
+                         _verdicts(gf, 'uuid_verdicts', 'relevance_verdicts'),
+                         _verdicts(gf, 'fastdds_verdicts')))
     return grid(rows)
+
+
+def _verdicts(counters: dict[str, Any], *names: str) -> str:
+    """The sum of the guard's counters ``names`` (:func:`cft_action.guard.filter_counts`),
+    or '-' where the phase reports none of them."""
+    found = [counters[n] for n in names if n in counters]
+    return str(sum(found)) if found else '-'
 
 
 def _kb(octets: Optional[float]) -> Optional[float]:
