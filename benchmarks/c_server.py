@@ -38,7 +38,7 @@ from cft_action import guard
 from harness import c_server, load
 from harness.cli import name_list
 from harness.domain import unused_domain
-from harness.proc import Proc, python_module
+from harness.proc import Proc, add_cpu_arguments, pinned, python_module
 from harness.report import (add_results_arguments, fmt, grid, markdown_only, markdown_table,
                             results_start, say)
 
@@ -53,8 +53,8 @@ def run_phase(server: c_server.CServer, config: str, args: argparse.Namespace,
               env: dict[str, str]) -> dict[str, Any]:
     """One configuration's clients against ``server``: their figures and the server's."""
     depth = max(1000, len(server.actions) * args.clients * args.goals * args.order + 100)
-    clients = [Proc(f'{config} {i}', python_module('harness.client', action, config, args.goals,
-                                                   args.order, depth), env)
+    clients = [Proc(f'{config} {i}', pinned(args.client_cpus, python_module(
+                        'harness.client', action, config, args.goals, args.order, depth)), env)
                for action in server.actions for i in range(args.clients)]
     try:
         for client in clients:
@@ -110,7 +110,7 @@ def run_point(guard_mode: str, size: str, args: argparse.Namespace) -> dict[str,
     server_env = guard.environment(env) if guard_mode == 'guarded' else env
     action = f'/cft_c_bench_{os.urandom(4).hex()}'
     server = c_server.start(action, args.period, env=server_env, servers=args.servers,
-                            pad=SIZES[size], depth='all')
+                            pad=SIZES[size], depth='all', cpus=args.server_cpus)
     phases = []
     try:
         for round_number, config in load.round_order(CONFIGS, args.rounds):
@@ -197,6 +197,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
     parser.add_argument('--sizes', type=name_list(SIZES), default=['36B', '1k'])
     parser.add_argument('--guards', type=name_list(GUARDS), default=list(GUARDS))
     parser.add_argument('--rounds', type=int, default=1, help='phases of each configuration')
+    add_cpu_arguments(parser)
     add_results_arguments(parser)
     return parser.parse_args(argv)
 

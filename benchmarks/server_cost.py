@@ -32,6 +32,8 @@ enclave of a keystore made for the run (:class:`harness.keystore.Keystore`), who
 protects discovery, liveliness, whole messages, submessages and payloads at that kind: plain rclpy
 and the library under the same governance. ``--network netns`` counts each client's received bytes
 on its own interface (``bytes``, a ratio to plain's too) instead of estimating them.
+``--server-cpus 0 --client-cpus 1`` keeps the server and its clients on separate CPUs, as when the
+clients run on other machines: a client woken by a datagram then cannot preempt the server.
 
 Results (machine, date, command, every raw figure) go to
 ``benchmarks/results/server-cost-<date>-<host>.json`` after every point; ``--plot`` draws
@@ -60,6 +62,7 @@ from typing import Any, Optional, Sequence
 
 from harness import load
 from harness.keystore import PROTECTIONS, Keystore
+from harness.proc import add_cpu_arguments
 from harness.machine import environment_facts
 from harness.report import fmt, grid, markdown_table
 
@@ -246,6 +249,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                         help='every process with DDS Security, everything protected at this kind')
     parser.add_argument('--network', choices=('count', 'netns'), default='count',
                         help='clients\' bytes: estimated, or received on their own interfaces')
+    add_cpu_arguments(parser)
     parser.add_argument('--drain-timeout', type=float, default=300.0,
                         help='seconds the clients may take the rest of a phase\'s feedback after '
                              'its goals (plain clients fall far behind at N = 32); the server\'s '
@@ -432,7 +436,9 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
                                          pad=SIZES[size], network=args.network, settle_s=2.0,
                                          drain_timeout=args.drain_timeout,
                                          guarded=GUARD_MODES[guard_mode][0],
-                                         server_env=GUARD_MODES[guard_mode][1])
+                                         server_env=GUARD_MODES[guard_mode][1],
+                                         server_cpus=args.server_cpus,
+                                         client_cpus=args.client_cpus)
                 if args.profile:
                     args.profile.mkdir(parents=True, exist_ok=True)
                 figures = run_point(spec, args.configs, args.phase_timeout, progress,

@@ -34,7 +34,7 @@ from typing import Any, Optional, Sequence
 
 from cft_action import guard
 from harness import native_cache
-from harness.proc import Proc
+from harness.proc import Proc, pinned
 
 #: The server's source.
 SOURCE = Path(__file__).resolve().parent / 'native' / 'action_server.c'
@@ -174,13 +174,14 @@ class CServer(Proc):
 
 
 def start(action: str, period: float, *, env: Optional[dict[str, str]] = None,
-          timeout: float = 30.0, **options: Any) -> CServer:
-    """Start the C server (``options``: those of :func:`command`) and wait for its ``READY``.
+          timeout: float = 30.0, cpus: Optional[str] = None, **options: Any) -> CServer:
+    """Start the C server (``options``: those of :func:`command`; on ``cpus`` only, as
+    :func:`harness.proc.pinned`) and wait for its ``READY``.
 
     :raises CServerUnavailable: it cannot be built here.
     :raises TimeoutError: it did not get ready (it is stopped then).
     """
-    argv = command(action, period, **options)
+    argv = pinned(cpus, command(action, period, **options))
     server = CServer('c_server', argv, dict(os.environ if env is None else env))
     try:
         server.actions = [str(a) for a in

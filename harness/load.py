@@ -38,7 +38,7 @@ from cft_action.action.client import FINISHED_GOAL_GRACE
 from harness import netns
 from harness.capture import CATEGORIES
 from harness.domain import unused_domain
-from harness.proc import Proc, python_module
+from harness.proc import Proc, pinned, python_module
 from harness.report import fmt, grid
 
 #: The configurations, in the order they run; ``rclpy`` (plain) first, since ratios refer to it.
@@ -101,6 +101,9 @@ class LoadSpec:
         (rclpy's default is 10); None: as every queue (:func:`queue_depth`).
     :ivar loss_percent: with namespaces, the share of the server's packets that each client
         drops as they arrive (:meth:`harness.netns.Topology.add_client`); 0: none.
+    :ivar server_cpus: the CPUs the server process may run on (``taskset -c`` syntax, e.g.
+        ``'0'``); None: any.
+    :ivar client_cpus: the same for every client process (bystanders included).
     """
 
     clients: int = 8
@@ -119,6 +122,8 @@ class LoadSpec:
     goal_interval_s: float = 0.0
     server_feedback_depth: Optional[int] = None
     loss_percent: float = 0.0
+    server_cpus: Optional[str] = None
+    client_cpus: Optional[str] = None
 
     @property
     def total_goals(self) -> int:
@@ -222,6 +227,7 @@ class LoadRun:
             argv += ['--feedback-depth', str(spec.server_feedback_depth)]
         if self.topology:
             argv = self.topology.command(self.topology.server, argv)
+        argv = pinned(spec.server_cpus, argv)
         server_env = {**self.env, **spec.server_env}
         self.server = Proc('server', argv,
                            guard.environment(server_env) if spec.guarded else server_env)
@@ -261,7 +267,7 @@ class LoadRun:
                                  self.depth, spec.goal_interval_s)
             if self.topology:
                 argv = self.topology.command(self.topology.add_client(spec.loss_percent), argv)
-            clients.append(Proc(name, argv, self.env))
+            clients.append(Proc(name, pinned(spec.client_cpus, argv), self.env))
         return clients
 
     def _network(self, clients: list[Proc]) -> list[Optional[dict[str, int]]]:

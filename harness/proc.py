@@ -14,6 +14,7 @@ puts the repository (:data:`ROOT`) first on every child's ``PYTHONPATH``, so the
 
 from __future__ import annotations
 
+import argparse
 import inspect
 import json
 import os
@@ -39,6 +40,22 @@ def python_module(module: str, *args: object) -> list[str]:
     ``tests.helpers.publisher``); a :class:`Proc` finds it through ``PYTHONPATH``.
     """
     return [sys.executable, '-u', '-m', module, *map(str, args)]
+
+
+def pinned(cpus: Optional[str], argv: list[str]) -> list[str]:
+    """``argv`` run on ``cpus`` only (``taskset -c`` syntax, e.g. ``'0'`` or ``'1-3'``), every
+    thread it will start included; ``argv`` as it is where ``cpus`` is None."""
+    return argv if cpus is None else ['taskset', '-c', cpus, *argv]
+
+
+def add_cpu_arguments(parser: argparse.ArgumentParser) -> None:
+    """A benchmark's ``--server-cpus`` and ``--client-cpus`` (for :func:`pinned`)."""
+    parser.add_argument('--server-cpus', default=None, metavar='CPUS',
+                        help='run the server on these CPUs only (taskset -c syntax, e.g. 0)')
+    parser.add_argument('--client-cpus', default=None, metavar='CPUS',
+                        help='run every client on these CPUs only (e.g. 1): with --server-cpus, '
+                             'a client woken by a datagram cannot preempt the server, as when '
+                             'the clients run on other machines')
 
 
 def guard_command() -> list[str]:
