@@ -38,7 +38,7 @@ from cft_action import guard
 from harness import c_server, load
 from harness.cli import name_list
 from harness.domain import unused_domain
-from harness.proc import Proc, add_cpu_arguments, pinned, python_module
+from harness.proc import Proc, add_cpu_arguments, pinned, python_module, stop_all
 from harness.report import (add_results_arguments, fmt, grid, markdown_only, markdown_table,
                             results_start, say)
 
@@ -77,8 +77,7 @@ def run_phase(server: c_server.CServer, config: str, args: argparse.Namespace,
                             progress=say)
         reports = [c.request_json('report', 'RESULT') for c in clients]
     finally:
-        for client in clients:
-            client.stop()
+        stop_all(clients)
     if server.poll() is not None:
         raise RuntimeError(f'the server died\n{server.tail()}')
     published = done['published'] - before['published']

@@ -38,7 +38,7 @@ from cft_action.action.client import FINISHED_GOAL_GRACE
 from harness import netns
 from harness.capture import CATEGORIES
 from harness.domain import unused_domain
-from harness.proc import Proc, pinned, python_module
+from harness.proc import Proc, pinned, python_module, stop_all
 from harness.report import fmt, grid
 
 #: The configurations, in the order they run; ``rclpy`` (plain) first, since ratios refer to it.
@@ -356,8 +356,7 @@ class LoadRun:
             after = self.server_stats()
             reports = [c.request_json('report', 'RESULT') for c in clients]
         finally:
-            for client in clients:
-                client.stop()
+            stop_all(clients)
             if self.topology:
                 # The namespaces of this phase's clients go with them; new ones come next phase.
                 self.topology.close_clients()

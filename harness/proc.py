@@ -27,7 +27,7 @@ import threading
 import time
 import typing
 from pathlib import Path
-from typing import Any, Callable, Mapping, Optional, Sequence
+from typing import Any, Callable, Iterable, Mapping, Optional, Sequence
 
 #: The repository: the directory that holds this package, ``demos``, ``benchmarks`` and ``tests``.
 ROOT = Path(__file__).resolve().parents[1]
@@ -226,6 +226,15 @@ class Proc:
     def tail(self, n: int = 30) -> str:
         """The last ``n`` lines, under a header with the name and exit status, for messages."""
         return f'--- {self.name} (rc={self.popen.returncode}) ---\n' + '\n'.join(self.lines[-n:])
+
+
+def stop_all(processes: Iterable[Proc], grace: float = 3.0) -> list[Optional[int]]:
+    """:meth:`Proc.stop` for each of ``processes``, their input closed all at once first, so that
+    they finish together rather than one after another; their exit statuses, in order."""
+    processes = list(processes)
+    for process in processes:
+        process.close_stdin()
+    return [process.stop(grace) for process in processes]
 
 
 def main_or_role(main: Callable[[list[str]], int], roles: dict[str, Callable[..., int]],

@@ -24,7 +24,7 @@ from test_msgs.action import Fibonacci
 
 from cft_action import guard
 from harness.crash import fastdds_library, live_backtrace
-from harness.proc import Proc, python_module
+from harness.proc import Proc, python_module, stop_all
 from harness.ros import RosSession, unique_name
 
 
@@ -371,8 +371,7 @@ def clients_on_the_wire(clients: Sequence[Sequence[object]], capture: Callable[.
         stop.set()
         if sniffer is not None:
             sniffer.join(timeout=10)  # it fills captured as it ends
-        for process in processes:
-            process.stop()
+        stop_all(processes)
         server.stop()
     return WireRun(reports, captured, at_go, after)
 

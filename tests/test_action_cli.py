@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from cft_action import guard
-from harness.proc import Proc, python_module
+from harness.proc import Proc, python_module, stop_all
 from harness.ros import unique_name
 
 CLI = [sys.executable, '-m', 'cft_action.cli', 'action']
@@ -61,8 +61,7 @@ def graph():
             proc.expect('READY', 60)
         yield guarded_action, unguarded_action
     finally:
-        for proc in procs:
-            proc.stop()
+        stop_all(procs)
 
 
 def _client(node: str, filtered_in: str, filter_class: str) -> dict[str, Any]:

@@ -22,6 +22,7 @@ import cft_action.action.client
 from cft_action import ActionClient, guard
 from cft_action.topics.filters import NEVER_MATCH
 from harness.polling import wait_until
+from harness.proc import stop_all
 from harness.ros import RosSession, unique_name
 from tests.support import (action_server, helper_process, prove_feedback_path, result_of,
                            round_trip, send, server_evidence)
@@ -76,8 +77,7 @@ def run_clients(server, action, mode, clients, goals, order, *, one_by_one=False
         return [{**report, **ready, 'server_published_since_go': published - published_at_go}
                 for report, ready in zip(reports, since_ready)]
     finally:
-        for child in children:
-            child.stop()
+        stop_all(children)
 
 
 def server_published(child):
@@ -173,8 +173,8 @@ def test_feedback_published_before_the_result_but_taken_after_it_is_delivered(ro
     (tests/test_rclpy_contract.py has the converse)."""
     action = '/' + unique_name('fib')
     order = 5
-    # 0.5 s apart, so that the goal is accepted long before its last feedback is published.
-    child = start_server(action, period=0.5)
+    # 0.25 s apart, so that the goal is accepted long before its last feedback is published.
+    child = start_server(action, period=0.25)
     try:
         client = make_client(ros, action, feedback_filter=mode)
         before = client.feedback_filter_state

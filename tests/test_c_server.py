@@ -23,7 +23,7 @@ import pytest
 
 from cft_action import guard
 from harness import c_server
-from harness.proc import Proc, python_module
+from harness.proc import Proc, python_module, stop_all
 from harness.ros import unique_name
 
 
@@ -41,8 +41,7 @@ def procs() -> Iterator[list[Proc]]:
     """The processes a test starts; all stopped when it ends, pass or fail."""
     started: list[Proc] = []
     yield started
-    for proc in reversed(started):
-        proc.stop()
+    stop_all(reversed(started))
 
 
 def guarded_server(procs: list[Proc], period: float, servers: int, **env: str) -> c_server.CServer:

@@ -23,6 +23,7 @@ import json
 import pytest
 
 from cft_action import guard
+from harness.proc import stop_all
 from harness.ros import unique_name
 from tests.support import action_server, helper_process
 
@@ -53,6 +54,5 @@ def test_coroutine_clients_on_multithreaded_executors_complete_every_goal(mode):
                 client.tail(40)
         assert server.poll() is None, f'server died\n{server.tail()}'
     finally:
-        for client in clients:
-            client.stop()
+        stop_all(clients)
         server.stop()

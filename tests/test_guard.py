@@ -35,7 +35,7 @@ os.environ.setdefault('ROS_AUTOMATIC_DISCOVERY_RANGE', 'LOCALHOST')
 
 from cft_action import guard
 from harness import crash, hazard
-from harness.proc import Proc, python_module
+from harness.proc import Proc, python_module, stop_all
 
 HELPERS = Path(__file__).resolve().parent / 'helpers'
 SCENARIO = 'tests.helpers.guard_scenario'
@@ -62,8 +62,7 @@ def procs() -> Iterator[list[Proc]]:
     """Processes started by a test; all of them are stopped when it ends, pass or fail."""
     started: list[Proc] = []
     yield started
-    for proc in started:
-        proc.stop()
+    stop_all(started)
 
 
 def start(procs: list[Proc], name: str, args: list[str], env: dict[str, str]) -> Proc:

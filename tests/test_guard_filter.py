@@ -33,6 +33,7 @@ from cft_action import create_filtered_subscription, guard, set_content_filter
 from cft_action.topics import sql
 from cft_action.topics.filters import MATCH_ALL, NEVER_MATCH, any_of, uuid_prefix_term
 from cft_action.topics.message_types import message_schema
+from harness.proc import stop_all
 from harness.ros import unique_name
 from tests.support import fastdds_header_probe, helper_process
 
@@ -260,8 +261,7 @@ def publisher() -> Iterator:
         return child
 
     yield start
-    for child in started:
-        child.stop()
+    stop_all(started)
 
 
 class Reader:

@@ -39,7 +39,7 @@ import pytest
 
 from cft_action import guard
 from harness import c_server, native_cache
-from harness.proc import Proc
+from harness.proc import Proc, stop_all
 from harness.ros import unique_name
 from tests.support import action_server, helper_process
 
@@ -287,8 +287,7 @@ def run(hostile_program: Path) -> Iterator[Run]:
         yield Run(reports, received, stats, lines, (first, last), (expected - base, removed),
                   stolen, alive)
     finally:
-        for process in reversed(processes):
-            process.stop()
+        stop_all(reversed(processes))
 
 
 def test_the_server_serves_every_other_client_exactly(run: Run) -> None:

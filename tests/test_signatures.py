@@ -22,6 +22,7 @@ import pytest
 
 from cft_action import _rcl
 from harness.capture import data_by_port
+from harness.proc import stop_all
 from harness.ros import unique_name
 from tests.support import feedback_on_the_wire
 from tests.test_action_client import start_server
@@ -102,5 +103,4 @@ def test_only_a_guarded_writer_says_it_filters_in_its_discovery_data(ros) -> Non
             marked = child.request_json('stats', 'STATS').get('guard_writers', {})
             assert (marked.get('marked', 0) > 0) is guarded, marked
     finally:
-        for _, child in servers.values():
-            child.stop()
+        stop_all(child for _, child in servers.values())

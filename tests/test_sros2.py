@@ -33,6 +33,7 @@ from cft_action import guard
 from harness.capture import protected_by_port
 from harness.crash import fastdds_library
 from harness.keystore import Keystore
+from harness.proc import stop_all
 from harness.ros import unique_name
 from tests.support import WireRun, action_server, clients_on_the_wire, helper_process
 
@@ -191,8 +192,7 @@ def test_a_participant_denied_the_action_topics_receives_nothing(keystore: Keyst
         got = {name: json.loads(proc.expect('RESULT', 90).split(' ', 1)[1])
                for name, proc in (('client', client), ('denied', denied), ('outsider', outsider))}
     finally:
-        for proc in procs:
-            proc.stop()
+        stop_all(procs)
     assert got['client']['complete_goals'] == GOALS, got
     assert set(got['denied']['refused']) == {'action_client', 'feedback', 'status'}, got
     assert got['denied']['feedback'] == got['denied']['status'] == 0, got
