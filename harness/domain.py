@@ -9,6 +9,7 @@ the domains in which a participant has bound a port.
 
 from __future__ import annotations
 
+import importlib.metadata
 import random
 from pathlib import Path
 from typing import Optional
@@ -51,3 +52,14 @@ def unused_domain(rng: Optional[random.Random] = None) -> int:
     busy = busy_domains()
     free = [domain for domain in DOMAINS if domain not in busy]
     return rng.choice(free or list(DOMAINS))
+
+
+def profiles_variable() -> str:
+    """The variable through which the installed rmw_fastrtps reads a Fast DDS profile file: Fast
+    DDS 2's for rmw_fastrtps 8 (Jazzy), which reads no other; Fast DDS 3's for rmw_fastrtps 9+,
+    which warns in every process that the other is deprecated."""
+    try:
+        major = int(importlib.metadata.version('ros-rmw-fastrtps-shared-cpp').split('.')[0])
+    except (importlib.metadata.PackageNotFoundError, ValueError):
+        major = 8
+    return 'FASTDDS_DEFAULT_PROFILES_FILE' if major >= 9 else 'FASTRTPS_DEFAULT_PROFILES_FILE'
