@@ -21,9 +21,11 @@ Three guard modes, each with its own servers:
 With ``--rounds R`` each server runs every configuration R times, in the given order in odd rounds
 and reversed in even ones (plain, cft, cft, plain, ...), so that a drift of the machine's load over
 the point weighs on both alike; each phase is compared with the plain phase of its round, and the
-tables give the medians over the rounds. Every phase also counts the server's context switches per
-message (``getrusage``): ``waits`` (voluntary) and ``preempted`` (involuntary: a thread that became
-runnable, such as a client's receive thread woken by a datagram, took the CPU).
+tables give the medians over the rounds. Every phase also gives the server's system share of its
+CPU per message (``sys``: the kernel's sending, and its waking of the clients' receive threads),
+and counts its context switches per message (``getrusage``): ``waits`` (voluntary) and
+``preempted`` (involuntary: a thread that became runnable, such as a client's receive thread woken
+by a datagram, took the CPU).
 
 A phase whose goals do not finish within ``--phase-timeout`` seconds is cut there; its rate is what
 was published until then, and the rest of that point's phases run against a fresh server.
@@ -143,6 +145,9 @@ def phase_figures(phase: dict[str, Any]) -> dict[str, Any]:
         'rate_per_goal_hz': summary['achieved_rate_hz'],
         'server_cpu_s': phase['server_cpu_goals_s'],
         'cpu_ms_per_msg': summary['server_cpu_ms_per_msg'],
+        'sys_ms_per_msg': (1000 * phase['server_sys_goals_s'] / phase['published_at_goals']
+                           if phase.get('server_sys_goals_s') is not None
+                           and phase['published_at_goals'] else None),
         'waits_per_msg': per_message(phase, 'switches'),
         'preempted_per_msg': per_message(phase, 'preempted'),
         'server_requests': phase.get('server_requests_goals', {}),
@@ -280,13 +285,14 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
 
 def format_table(points: list[dict[str, Any]]) -> str:
     rows = [('guard', 'size', 'N', 'round', 'configuration', 'msgs', 'goals s', 'msgs/s',
-             'rate x plain', 'CPU ms/msg', 'CPU x plain', 'waits/msg', 'preempted/msg',
+             'rate x plain', 'CPU ms/msg', 'CPU x plain', 'sys ms/msg', 'waits/msg',
+             'preempted/msg',
              'kB/client', 'bytes x plain', 'guard verdicts', 'Fast DDS verdicts')]
     for point in points:
         for f in point['figures']:
             head = (point['guard'], point['size'], str(point['clients']), str(f.get('round', 1)))
             if 'error' in f:
-                rows.append((*head, load.CONFIG_LABELS[f['config']] + ' (failed)', *['-'] * 12))
+                rows.append((*head, load.CONFIG_LABELS[f['config']] + ' (failed)', *['-'] * 13))
                 continue
             r = f['ratio_to_plain']
             gf = f['guard_filter']
@@ -295,6 +301,7 @@ def format_table(points: list[dict[str, Any]]) -> str:
                          str(f['published']), fmt(f['goals_s'], '.1f'),
                          fmt(f['rate_msgs_per_s'], '.0f'), fmt(r['rate'], '.2f'),
                          fmt(f['cpu_ms_per_msg'], '.3f'), fmt(r['cpu_per_msg'], '.2f'),
+                         fmt(f.get('sys_ms_per_msg'), '.3f'),
                          fmt(f.get('waits_per_msg'), '.2f'), fmt(f.get('preempted_per_msg'), '.2f'),
                          fmt(_kb(f.get('bytes_per_client')), '.1f'), fmt(r.get('bytes'), '.2f'),
                          _verdicts(gf, 'uuid_verdicts', 'relevance_verdicts'),

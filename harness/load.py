@@ -373,6 +373,8 @@ class LoadRun:
             'accepted': after['accepted'] - before['accepted'],
             'server_cpu_s': after['cpu_s'] - before['cpu_s'],
             'server_cpu_goals_s': done['cpu_s'] - before['cpu_s'],
+            # its system (kernel) share: sending, and waking the threads that receive
+            'server_sys_goals_s': done['sys_s'] - before['sys_s'] if 'sys_s' in done else None,
             'published_at_goals': done['published'] - before['published'],
             # the server's context switches (harness.server's stats), go to its last goal
             'server_switches_goals': {k: done[k] - before[k] for k in ('switches', 'preempted')

@@ -45,8 +45,9 @@ goal responses sent, and sends that failed: rclpy logs those and drops the goal,
 dropped because the client's response reader was not matched within 100 ms, which rclpy only
 warns of while the goal runs), ``cancel_requests`` (cancel requests taken),
 ``intervals`` and ``interval_s`` (feedback intervals of finished goals and the seconds they took),
-``cpu_s`` (user + system seconds of this process so far), ``switches`` and ``preempted`` (its
-threads' voluntary and involuntary context switches so far: waits, and preemptions), ``guard``
+``cpu_s`` (user + system seconds of this process so far; ``sys_s``: the system seconds alone),
+``switches`` and ``preempted`` (its threads' voluntary and involuntary context switches so far:
+waits, and preemptions), ``guard``
 (the server guard's status line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and
 ``guard_filter_class`` (its call, filter-verdict, writer-limit and filter-class counters),
 ``guard_replies`` (its reply filter's), ``guard_prefilter`` (its Fast DDS 3 layer's state,
@@ -386,6 +387,7 @@ class TickingServer:
                     'release_reason': self.release_reason, 'maxrss_kb': usage.ru_maxrss,
                     'late_ticks': self.late_ticks, 'intervals': self.intervals,
                     'interval_s': self.interval_s, 'cpu_s': usage.ru_utime + usage.ru_stime,
+                    'sys_s': usage.ru_stime,
                     'switches': usage.ru_nvcsw, 'preempted': usage.ru_nivcsw,
                     'guard': guard.status(), 'guard_calls': guard.call_counts(),
                     'guard_filter': guard.filter_counts(), 'guard_writers': guard.writer_limits(),
