@@ -189,17 +189,22 @@ def machine_line() -> str:
 
 
 def fastdds_library() -> str:
-    """The real path of the libfastrtps that this process and its children load.
+    """The real path of the Fast DDS library (libfastrtps 2.x or libfastdds 3.x) that this process
+    and its children load: the one mapped here, else the first on ``LD_LIBRARY_PATH``, else this
+    environment's (the wheels put it in ``<prefix>/lib``).
 
     A run on another stack (``compat/stack_env.sh``) swaps the library, not the wheels' versions
     that :func:`machine_line` lists, so the line names the file itself.
     """
+    names = ('libfastrtps.so.2', 'libfastdds.so.3')
     with open('/proc/self/maps') as maps:
         for line in maps:
-            if 'libfastrtps.so' in line:
+            if any(name in line for name in names):
                 return line.split()[-1]
-    for directory in os.environ.get('LD_LIBRARY_PATH', '').split(os.pathsep):
-        candidate = Path(directory or '.') / 'libfastrtps.so.2.14'
-        if directory and candidate.exists():
-            return str(candidate.resolve())
-    return 'not found on LD_LIBRARY_PATH'
+    directories = [d for d in os.environ.get('LD_LIBRARY_PATH', '').split(os.pathsep) if d]
+    for directory in [*directories, str(Path(sys.prefix) / 'lib')]:
+        found = sorted(p for name in names for p in Path(directory).glob(name + '.*')
+                       if p.name.count('.') == 3)  # libfastdds.so.3.6, not .so.3.6.2
+        if found:
+            return str(found[0].resolve())
+    return 'not found on LD_LIBRARY_PATH or in ' + str(Path(sys.prefix) / 'lib')

@@ -105,14 +105,16 @@ def fastdds_header_probe(source: str, tmp_path: Path) -> list[int]:
 
 
 def loaded_fastdds_version() -> Optional[tuple[int, int, int]]:
-    """The version of the libfastrtps this process has loaded, or None when it cannot tell.
+    """The version of the Fast DDS library this process loads, or None when it cannot tell.
 
     From the file's real name (a stack's ``libfastrtps.so.2.14.6``), or, for the ROS wheels' copy
-    in this venv (named only ``libfastrtps.so.2.14``), from the ``ros-fastrtps`` wheel's version.
+    in this venv (named only ``libfastrtps.so.2.14``), from the ``ros-fastrtps`` wheel's version
+    (Fast DDS 3's wheel, ``ros-fastdds`` 3.2.3, holds Fast DDS 3.2.2: None there).
     """
     real = os.path.realpath(fastdds_library())
-    match = re.search(r'libfastrtps\.so\.(\d+)\.(\d+)\.(\d+)$', real)
-    if match is None and Path(real).parent == Path(sys.prefix, 'lib').resolve():
+    match = re.search(r'lib(?:fastrtps|fastdds)\.so\.(\d+)\.(\d+)\.(\d+)', real)
+    if match is None and Path(real).parent == Path(sys.prefix, 'lib').resolve() and \
+            'libfastrtps' in real:
         match = re.match(r'(\d+)\.(\d+)\.(\d+)', importlib.metadata.version('ros-fastrtps'))
     if match is None:
         return None
