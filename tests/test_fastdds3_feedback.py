@@ -1,0 +1,120 @@
+# Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+"""Feedback on the wire on Fast DDS 3.3+ (Lyrical's 3.6.2, `make compat-kilted`): under the guard,
+each client whose feedback reader asks for its own goals' feedback only (USER_DATA mark) receives
+only its goals' feedback, through the feedback writer's public sample prefilter
+(cft_action/native/guard/fastdds3/, _guard_feedback.c); plain clients and monitors receive all.
+
+A server (its own process) serves three marked clients, a plain rclpy client and a plain rclpy
+client with no goals (a feedback monitor: its feedback reader gets every sample), each in its own
+process on UDP only; a raw socket on loopback (root) reads the feedback writer's DATA by
+destination port, one port per client's participant, with each DATA's payload (its goal UUID).
+Skipped where the guard's Fast DDS 3 layer is not built (no Fast DDS 3.3+ headers: Jazzy, Kilted's
+wheels).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+
+import pytest
+
+from cft_action import guard
+from harness.capture import samples_by_port
+from harness.ros import unique_name
+from tests.support import action_server, clients_on_the_wire, helper_process, UDP_ONLY, WireRun
+from tests.test_fastdds3_replies import MISSING
+
+ORDER = 8
+#: (mode, goals): three clients that mark their feedback reader, a plain one, a monitor.
+CLIENTS = (('marked', 2), ('marked', 3), ('marked', 4), ('rclpy', 2), ('rclpy', 0))
+MARKED = 3
+pytestmark = [
+    pytest.mark.skipif(MISSING is not None, reason=MISSING or ''),
+    pytest.mark.skipif(os.geteuid() != 0, reason='a raw socket needs root'),
+]
+
+
+def feedback_run(guarded: bool, server_env: dict[str, str] | None = None) -> WireRun:
+    """The clients of CLIENTS against one server, the feedback writer's DATA captured."""
+    return clients_on_the_wire([(mode, goals, ORDER) for mode, goals in CLIENTS],
+                               samples_by_port, guarded=guarded, server_env=server_env,
+                               together=True)
+
+
+def goals_by_port(run: WireRun) -> dict[int, list[bytes]]:
+    """The goal UUID of each feedback DATA each port received (payload bytes 4-20)."""
+    return {port: [payload[4:20] for payload in seen.payloads.values()]
+            for port, seen in run.captured.items()}
+
+
+def assert_every_client_took_its_feedback(run: WireRun) -> None:
+    """Every goal got its result and its feedback whole, and no callback got another's."""
+    for (mode, goals), report in zip(CLIENTS, run.reports):
+        assert report['results'] == goals and report['misrouted'] == 0, (mode, report)
+        assert report['complete_goals'] == goals, (mode, report)
+
+
+def test_each_marked_client_receives_only_its_own_feedback() -> None:
+    """Under the guard: each marked client's port receives exactly its goals' feedback, the plain
+    client's and the monitor's every sample; the guard's layer is on, its feedback writer
+    routed, and it withheld the others' samples from each marked reader."""
+    run = feedback_run(guarded=True)
+    assert_every_client_took_its_feedback(run)
+    assert run.stats_after['guard_prefilter'].startswith('on: '), run.stats_after
+    every = sum(goals for _, goals in CLIENTS) * ORDER
+    owned = {frozenset(bytes.fromhex(g) for g in report['goal_ids']): goals
+             for (_, goals), report in zip(CLIENTS[:MARKED], run.reports)}
+    received = goals_by_port(run)
+    assert sorted(map(len, received.values())) == sorted(
+        [goals * ORDER for _, goals in CLIENTS[:MARKED]] + [every, every]), received.keys()
+    for uuids in received.values():
+        if len(uuids) < every:
+            assert frozenset(uuids) in owned, 'a marked client received another goal'
+    counts = run.stats_after['guard_feedback']
+    assert counts['writers'] == 1 and counts['withheld'] > 0, counts
+    assert counts['unknown'] == counts['malformed'] == 0, counts
+
+
+def test_an_unguarded_server_sends_every_client_all_feedback() -> None:
+    """Without the guard the mark is ignored: every port receives every sample, and every client
+    its own goals' feedback whole."""
+    run = feedback_run(guarded=False)
+    assert_every_client_took_its_feedback(run)
+    every = sum(goals for _, goals in CLIENTS) * ORDER
+    assert {len(uuids) for uuids in goals_by_port(run).values()} == {every}
+
+
+def test_with_the_feedback_prefilter_off_every_client_receives_all() -> None:
+    """CFT_GUARD_FEEDBACK=off: the guard leaves the feedback writer as rmw_fastrtps made it."""
+    run = feedback_run(guarded=True, server_env={guard.FEEDBACK_ENV: 'off'})
+    assert_every_client_took_its_feedback(run)
+    every = sum(goals for _, goals in CLIENTS) * ORDER
+    assert {len(uuids) for uuids in goals_by_port(run).values()} == {every}
+    assert run.stats_after['guard_feedback']['writers'] == 0, run.stats_after['guard_feedback']
+
+
+def test_a_late_joiner_gets_its_goals_feedback() -> None:
+    """A marked client that starts while another's goals publish feedback gets its own goals'
+    feedback whole, and neither gets another's in a callback."""
+    env = {**os.environ, **UDP_ONLY}
+    action = '/' + unique_name('cft_late')
+    server = action_server(action, 0.01, env=guard.environment(env))
+    clients = []
+    try:
+        first = helper_process('tests.helpers.fib_client', [action, 'marked', 2, 300], env=env)
+        clients.append(first)
+        first.send('go')
+        late = helper_process('tests.helpers.fib_client', [action, 'marked', 2, ORDER], env=env)
+        clients.append(late)
+        late.send('go')
+        reports = [json.loads(client.expect('RESULT', timeout=90).split(' ', 1)[1])
+                   for client in (late, first)]
+        counts = server.request_json('stats', 'STATS')['guard_feedback']
+    finally:
+        for client in clients:
+            client.stop()
+        server.stop()
+    for report, goals in zip(reports, (2, 2)):
+        assert report['complete_goals'] == goals and report['misrouted'] == 0, report
+    assert counts['withheld'] > 0, counts
