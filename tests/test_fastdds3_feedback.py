@@ -1,12 +1,13 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
 """Feedback on the wire on Fast DDS 3.3+ (Lyrical's 3.6.2, `make compat-kilted`): under the guard,
-each client whose feedback reader asks for its own goals' feedback only (USER_DATA mark) receives
-only its goals' feedback, through the feedback writer's public sample prefilter
-(cft_action/native/guard/fastdds3/, _guard_feedback.c); plain clients and monitors receive all.
+each of the library's clients, whose feedback reader asks for its own goals' feedback only (a
+USER_DATA mark, cft_action/native/reader/fastdds3/), receives only its goals' feedback, through the
+feedback writer's public sample prefilter (cft_action/native/guard/fastdds3/, _guard_feedback.c);
+plain clients and monitors receive all.
 
-A server (its own process) serves three marked clients, a plain rclpy client and a plain rclpy
-client with no goals (a feedback monitor: its feedback reader gets every sample), each in its own
-process on UDP only; a raw socket on loopback (root) reads the feedback writer's DATA by
+A server (its own process) serves three of the library's clients, a plain rclpy client and a
+plain rclpy client with no goals (a feedback monitor: its feedback reader gets every sample), each
+in its own process on UDP only; a raw socket on loopback (root) reads the feedback writer's DATA by
 destination port, one port per client's participant, with each DATA's payload (its goal UUID).
 Skipped where the guard's Fast DDS 3 layer is not built (no Fast DDS 3.3+ headers: Jazzy, Kilted's
 wheels).
@@ -26,9 +27,9 @@ from tests.support import action_server, clients_on_the_wire, helper_process, UD
 from tests.test_fastdds3_replies import MISSING
 
 ORDER = 8
-#: (mode, goals): three clients that mark their feedback reader, a plain one, a monitor.
-CLIENTS = (('marked', 2), ('marked', 3), ('marked', 4), ('rclpy', 2), ('rclpy', 0))
-MARKED = 3
+#: (mode, goals): three of the library's clients, a plain one, a monitor.
+CLIENTS = (('client', 2), ('client', 3), ('client', 4), ('rclpy', 2), ('rclpy', 0))
+LIBRARY = 3
 pytestmark = [
     pytest.mark.skipif(MISSING is not None, reason=MISSING or ''),
     pytest.mark.skipif(os.geteuid() != 0, reason='a raw socket needs root'),
@@ -55,57 +56,67 @@ def assert_every_client_took_its_feedback(run: WireRun) -> None:
         assert report['complete_goals'] == goals, (mode, report)
 
 
-def test_each_marked_client_receives_only_its_own_feedback() -> None:
-    """Under the guard: each marked client's port receives exactly its goals' feedback, the plain
+def filtered_in(run: WireRun) -> list[str]:
+    """The library's clients' ``filtered_in``."""
+    return [report['filtered_in'] for report in run.reports[:LIBRARY]]
+
+
+def test_each_library_client_receives_only_its_own_feedback() -> None:
+    """Under the guard: each library client's port receives exactly its goals' feedback, the plain
     client's and the monitor's every sample; the guard's layer is on, its feedback writer
-    routed, and it withheld the others' samples from each marked reader."""
+    routed, and it withheld the others' samples from each library client; the clients say that
+    the writer filters."""
     run = feedback_run(guarded=True)
     assert_every_client_took_its_feedback(run)
+    assert filtered_in(run) == ['writer'] * LIBRARY, run.reports
     assert run.stats_after['guard_prefilter'].startswith('on: '), run.stats_after
     every = sum(goals for _, goals in CLIENTS) * ORDER
     owned = {frozenset(bytes.fromhex(g) for g in report['goal_ids']): goals
-             for (_, goals), report in zip(CLIENTS[:MARKED], run.reports)}
+             for (_, goals), report in zip(CLIENTS[:LIBRARY], run.reports)}
     received = goals_by_port(run)
     assert sorted(map(len, received.values())) == sorted(
-        [goals * ORDER for _, goals in CLIENTS[:MARKED]] + [every, every]), received.keys()
+        [goals * ORDER for _, goals in CLIENTS[:LIBRARY]] + [every, every]), received.keys()
     for uuids in received.values():
         if len(uuids) < every:
-            assert frozenset(uuids) in owned, 'a marked client received another goal'
+            assert frozenset(uuids) in owned, "a library client received another's goal"
     counts = run.stats_after['guard_feedback']
     assert counts['writers'] == 1 and counts['withheld'] > 0, counts
     assert counts['unknown'] == counts['malformed'] == 0, counts
 
 
 def test_an_unguarded_server_sends_every_client_all_feedback() -> None:
-    """Without the guard the mark is ignored: every port receives every sample, and every client
-    its own goals' feedback whole."""
+    """Without the guard the mark is ignored: every port receives every sample, every client its
+    own goals' feedback whole, and the library's clients say that nothing filters (plain rclpy)."""
     run = feedback_run(guarded=False)
     assert_every_client_took_its_feedback(run)
+    assert filtered_in(run) == ['none'] * LIBRARY, run.reports
     every = sum(goals for _, goals in CLIENTS) * ORDER
     assert {len(uuids) for uuids in goals_by_port(run).values()} == {every}
 
 
 def test_with_the_feedback_prefilter_off_every_client_receives_all() -> None:
-    """CFT_GUARD_FEEDBACK=off: the guard leaves the feedback writer as rmw_fastrtps made it."""
+    """CFT_GUARD_FEEDBACK=off: the guard leaves the feedback writer as rmw_fastrtps made it, and
+    the library's clients say that nothing filters."""
     run = feedback_run(guarded=True, server_env={guard.FEEDBACK_ENV: 'off'})
     assert_every_client_took_its_feedback(run)
+    assert filtered_in(run) == ['none'] * LIBRARY, run.reports
     every = sum(goals for _, goals in CLIENTS) * ORDER
     assert {len(uuids) for uuids in goals_by_port(run).values()} == {every}
     assert run.stats_after['guard_feedback']['writers'] == 0, run.stats_after['guard_feedback']
 
 
 def test_a_late_joiner_gets_its_goals_feedback() -> None:
-    """A marked client that starts while another's goals publish feedback gets its own goals'
+    """A library client that starts while another's goals publish feedback gets its own goals'
     feedback whole, and neither gets another's in a callback."""
     env = {**os.environ, **UDP_ONLY}
     action = '/' + unique_name('cft_late')
     server = action_server(action, 0.01, env=guard.environment(env))
     clients = []
     try:
-        first = helper_process('tests.helpers.fib_client', [action, 'marked', 2, 300], env=env)
+        first = helper_process('tests.helpers.fib_client', [action, 'client', 2, 300], env=env)
         clients.append(first)
         first.send('go')
-        late = helper_process('tests.helpers.fib_client', [action, 'marked', 2, ORDER], env=env)
+        late = helper_process('tests.helpers.fib_client', [action, 'client', 2, ORDER], env=env)
         clients.append(late)
         late.send('go')
         reports = [json.loads(client.expect('RESULT', timeout=90).split(' ', 1)[1])

@@ -1,10 +1,8 @@
 """A client process for the ActionClient tests: sends goals on command and reports what arrived.
 
 Usage: ``python -m tests.helpers.fib_client ACTION MODE GOALS ORDER [WRITER_FILTERING]``
-MODE is a cft_action feedback_filter mode, ``rclpy``, or ``marked`` (a plain rclpy client whose
-feedback reader asks a guarded Fast DDS 3.3+ server for its own goals' feedback only, as the
-library's client does there: cft_action._rcl.mark_own_feedback_reader); WRITER_FILTERING is the
-client's ``writer_filtering`` (default ``guarded``). Before ``READY`` the client proves its
+MODE is a cft_action feedback_filter mode, or ``rclpy``; WRITER_FILTERING is the client's
+``writer_filtering`` (default ``guarded``). Before ``READY`` the client proves its
 goal service and its feedback path (:func:`tests.support.prove_feedback_path`): wait_for_server
 only sees the server in the graph, and a server that matched the client's feedback reader late
 loses a goal's first feedback for any client. Then the line ``go`` sends GOALS goals of ORDER
@@ -48,19 +46,10 @@ def main() -> None:
     writer_filtering = sys.argv[5] if len(sys.argv) > 5 else 'guarded'
     rclpy.init()
     node = Node(f'cft_test_client_{uuid.uuid4().hex[:8]}')
-    if mode in ('rclpy', 'marked'):
+    if mode == 'rclpy':
         from rclpy.action import ActionClient as RclpyActionClient
         client = RclpyActionClient(node, Fibonacci, action, **DEEP_QOS)
         client.new_goal_uuid = lambda: UUID(uuid=list(uuid.uuid4().bytes))
-        if mode == 'marked':
-            from cft_action import _rcl
-            with client._client_handle:
-                subscription, reason = _rcl.action_feedback_subscription(
-                    client._client_handle.pointer, node.resolve_topic_name(action))
-                reason = reason or _rcl.mark_own_feedback_reader(subscription)
-            if reason:
-                print(f'FAILED {reason}', flush=True)
-                return
     else:
         client = ActionClient(node, Fibonacci, action, feedback_filter=mode,
                               writer_filtering=writer_filtering, **DEEP_QOS)
