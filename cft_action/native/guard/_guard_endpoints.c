@@ -237,8 +237,13 @@ static void *routing_of(const void *publisher) {
 static bool set_routing(const void *publisher, void *routing) {
   bool stored = routing == NULL;
   pthread_mutex_lock(&routed_lock);
-  for (int i = 0; i < routed_count; i++)
-    if (routed[i].publisher == publisher) routed[i] = routed[--routed_count];
+  // routed_count is read without the lock too (rcl_publish's quick test): stored atomically.
+  for (int i = 0; i < routed_count; i++) {
+    if (routed[i].publisher != publisher) continue;
+    routed[i] = routed[routed_count - 1];
+    __atomic_store_n(&routed_count, routed_count - 1, __ATOMIC_RELEASE);
+    break;  // a publisher is stored once
+  }
   if (routing != NULL && routed_count < ROUTED_MAX) {
     routed[routed_count].publisher = publisher, routed[routed_count].routing = routing;
     __atomic_store_n(&routed_count, routed_count + 1, __ATOMIC_RELEASE);

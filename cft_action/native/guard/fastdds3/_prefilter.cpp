@@ -2,8 +2,9 @@
 //
 // The server guard's Fast DDS 3 layer: the guard's per-reader decisions, given to a Fast DDS 3.3+
 // writer through its public API. It decides nothing itself: which reader gets which sample is the
-// family-free parts' (_guard_replies.c's cft_reply_verdict, passed in); this file only carries
-// their answer to Fast DDS.
+// family-free parts' (_guard_replies.c's cft_reply_verdict, _guard_feedback.c's
+// cft_feedback_verdict, passed in); this file only carries their answer to Fast DDS, and tells
+// the feedback verdict which readers asked for it (their USER_DATA, read outside the prefilter).
 //
 // It stands on `DataWriter::set_sample_prefilter(std::shared_ptr<IContentFilter>)` (Fast DDS 3.3+,
 // fastdds/dds/publisher/DataWriter.hpp): the writer asks the prefilter, in
@@ -12,7 +13,7 @@
 // FilterSampleInfo (its sample identity and related sample identity), under the writer's own
 // filters mutex. A reader the prefilter refuses gets no DATA: a reliable one a GAP, as for any
 // content-filtered change. Nothing is written into the DATA (no filter signature). The prefilter
-// is not told a change's kind: a reply topic has no key, so every change of it is ALIVE.
+// is not told a change's kind: reply and feedback topics have no key, so every change is ALIVE.
 //
 // Built by setup.py only against Fast DDS 3.3+ headers, as its own library linked against that Fast
 // DDS (libfastdds.so.3.<minor>): its headers' constants have initializers that call into Fast DDS,
@@ -96,7 +97,11 @@ class FeedbackRouting final : public IContentFilter {
 
   // The readers `writer` matches, each marked or not; only those new since the last call are
   // looked up, unless every one is due again. Returns how many are marked.
+  // One caller at a time (a writer may publish from several threads); another meanwhile returns
+  // -1 at once: the running one brings the knowledge up to date.
   int32_t readers(DataWriter &writer) {
+    std::unique_lock<std::mutex> reading(reading_, std::try_to_lock);
+    if (!reading.owns_lock()) return -1;
     std::vector<InstanceHandle_t> handles;
     if (writer.get_matched_subscriptions(handles) != RETCODE_OK) return -1;
     Clock::time_point now = Clock::now();
@@ -130,7 +135,8 @@ class FeedbackRouting final : public IContentFilter {
   const std::string mark_;
   mutable std::mutex mutex_;
   std::map<GUID_t, bool> marked_;  // under mutex_
-  Clock::time_point read_at_;      // the readers' last full reading (readers() only)
+  std::mutex reading_;             // held by readers()
+  Clock::time_point read_at_;      // the readers' last full reading (under reading_)
 };
 
 }  // namespace
