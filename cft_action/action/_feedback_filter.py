@@ -107,8 +107,8 @@ class FeedbackFilter:
             self.reader.fall_back('the rmw implementation has no content filter')
         elif pointer is None:
             self.reader.fall_back(pointer_reason)
-        elif self.reader.filter_class and _rcl.filter_class_status():
-            self._ask_own_feedback(handle, pointer, _rcl.filter_class_status())
+        elif self.reader.filter_class and (why := _rcl.filter_class_status()):
+            self._ask_own_feedback(handle, pointer, why)
         else:
             plan = GoalFilterPlan(self.mode)
             if self.reader.install(handle, pointer, topic,
