@@ -20,7 +20,9 @@ Where it knows the Fast DDS, it also sends each of an action's goal, cancel and 
 to the response readers of the participant that sent the request (the others' take would discard
 it): see :func:`reply_counts`; ``CFT_GUARD_REPLIES=off`` sends every reply to every client, as
 rmw_fastrtps does. On Fast DDS 3.3+ (Lyrical) it does so through the writers' public sample
-prefilter, where the package was built against those headers: see :func:`prefilter`.
+prefilter, where the package was built against those headers: see :func:`prefilter`; there it
+also sends each of this library's clients only its own goals' feedback (:func:`feedback_counts`,
+``CFT_GUARD_FEEDBACK=off``).
 
 It only locks on a Fast DDS it knows (``libfastrtps.so.2.14``, ``libfastdds.so.3.6``,
 ``libfastdds.so.3.2``). On any other version it calls straight through and prints one line on
