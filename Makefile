@@ -29,7 +29,7 @@ STAMP := $(VENV)/.installed
 $(VENV)/bin/python:
 	$(PYTHON_EXE) -m venv $(VENV)
 
-$(STAMP): pyproject.toml setup.py $(shell find cft_action/native -name "*.[ch]" -o -name "*.cpp") | $(VENV)/bin/python
+$(STAMP): pyproject.toml setup.py $(shell find cft_action/native -name "*.[ch]" -o -name "*.[ch]pp") | $(VENV)/bin/python
 	$(PY) -m pip install --quiet --disable-pip-version-check -e '.[jazzy,test,bench,lint]'
 	touch $(STAMP)
 
@@ -47,7 +47,7 @@ test: $(STAMP)
 KILTED_VENV ?= .venv-kilted
 KILTED_PYTHON ?= python3.12
 KILTED_TREE := build/kilted-tree
-KILTED_TESTS ?= tests/test_fastdds3.py tests/test_fastdds3_replies.py \
+KILTED_TESTS ?= tests/test_fastdds3.py tests/test_fastdds3_replies.py tests/test_fastdds3_feedback.py \
     tests/test_build_without_headers.py tests/test_rclpy_contract.py tests/test_errors.py \
     tests/test_sql.py tests/test_filters.py
 # The wheels, by a first install (not in place; its build is replaced by the tree's below).

@@ -7,16 +7,18 @@ Their sources are in ``cft_action/native/``, by the process they run in:
   ``_guard.c`` (the locks and the interposed Fast DDS members), ``_guard_families.c`` (which Fast
   DDS is loaded and where its real members are), ``_guard_filter.c`` (the DDS-SQL accelerator),
   ``_guard_writer_qos.c`` (the writers' filtered-reader limit and mark), ``_guard_heartbeats.c``,
-  ``_guard_replies.c``, ``_guard_status.c``, ``_guard_endpoints.c`` and ``_guard_log.c``;
+  ``_guard_replies.c``, ``_guard_status.c``, ``_guard_goals.c``, ``_guard_feedback.c``,
+  ``_guard_endpoints.c`` and ``_guard_log.c``;
 - ``native/guard/fastdds3/`` builds ``_cftguard_fastdds3``, the guard's Fast DDS 3.3+ layer (C++,
-  public API: the writers' sample prefilter), only where Fast DDS 3.3+ headers and their library are
-  found; it is linked against that Fast DDS, and the guard loads it only into a process that has it
-  loaded;
+  public API: the writers' sample prefilter and USER_DATA), and ``native/reader/fastdds3/``
+  ``_cftreader_fastdds3``, the client's (its feedback reader's USER_DATA), only where Fast DDS 3.3+
+  headers and their library are found; each is linked against that Fast DDS, and loaded only into
+  a process that has it loaded;
 - ``native/reader/`` builds ``_cftreader``, loaded with ctypes by ``cft_action._rcl`` into every
   process that changes a filter or takes an action client's status: the reader lock, the reader's
   filter class, the writer marks, the PLT patcher, the status trim and the response filter;
 - ``native/`` itself holds what both are built from: the filter classes (``_filter_class.c``,
-  ``_uuid_program.c``, ``_node_program.c``), the CDR reader and the layout probe.
+  ``_uuid_program.c``, ``_node_program.c``), the CDR reader and the layout probes.
 
 Both read Fast DDS objects at offsets that come from the Fast DDS headers found at build time:
 ``cft_action/native/_fastdds_layout.cpp`` is compiled to assembly against them, and its offsets
@@ -43,6 +45,11 @@ from setuptools import Extension, setup
 from setuptools.command.build_ext import build_ext
 
 PROBE = 'cft_action/native/_fastdds_layout.cpp'
+#: rmw's layouts (cft_action/native/_rmw_layout.cpp), probed wherever rmw's headers are found.
+RMW_PROBE = 'cft_action/native/_rmw_layout.cpp'
+#: The folders under an include directory that rmw/types.h needs (one per package, as ROS installs).
+RMW_PACKAGES = ('rmw', 'rcutils', 'rosidl_runtime_c', 'rosidl_typesupport_interface',
+                'rosidl_dynamic_typesupport')
 LAYOUT_HEADER = '_fastdds_layout.h'
 
 
@@ -106,12 +113,33 @@ def fastdds_include_dirs() -> tuple[list[Path], str, list[Path], tuple[int, int]
             # fastcdr and foonathan_memory: beside it (wheels), in their own folders (apt), or in a
             # later candidate (CFT_FASTDDS_INCLUDE=<stack headers>:<venv>/include).
             root = include.parent if include.name == 'fastrtps' else include
-            # rmw and rcutils: rmw's service structures, for the guard (_fastdds_layout.cpp).
-            near = [root / 'fastcdr', root / 'foonathan_memory', root / 'rmw', root / 'rcutils',
-                    root]
+            near = [root / 'fastcdr', root / 'foonathan_memory', root]
             return (list(dict.fromkeys([include] + [d for d in near + candidates if d.is_dir()])),
                     f'Fast DDS headers in {include}', [], (2, 14))
     return [], 'no Fast DDS headers were found at build time', [], (0, 0)
+
+
+def probe(compiler: str, source: str, includes: list[Path], *options: str) -> list[tuple[str, ...]]:
+    """The ``->NAME VALUE what`` lines of ``source`` compiled to assembly against ``includes``
+    (empty, and said on stderr, if it does not compile)."""
+    result = subprocess.run([compiler, '-std=c++17', '-S', '-o', '-', *options,
+                             *[f'-I{d}' for d in includes], source],
+                            capture_output=True, text=True, check=False)
+    lines = re.findall(r'^\s*->(\w+) \$?(-?\d+) ?(.*)$', result.stdout, re.MULTILINE)
+    if result.returncode != 0 or not lines:
+        print(f'setup.py: {source} did not compile against {includes[0]}:\n'
+              f'{result.stderr[-2000:]}', file=sys.stderr)
+        return []
+    return lines
+
+
+def rmw_include_dirs() -> list[Path]:
+    """The include directories of the first rmw headers found among the Fast DDS headers'
+    candidates (the ROS wheels, a colcon underlay, /opt/ros/<distro>), for RMW_PROBE."""
+    for include in header_candidates():
+        if (include / 'rmw' / 'rmw' / 'types.h').is_file():
+            return [include / p for p in RMW_PACKAGES if (include / p).is_dir()]
+    return []
 
 
 def c_string(text: str) -> str:
@@ -127,18 +155,12 @@ def layout_header(build_temp: Path) -> None:
     lines: list[str] = []
     source = ''
     if includes and compiler:
-        result = subprocess.run(
-            [compiler, '-std=c++17', '-S', '-o', '-', '-fno-access-control',
-             '-Wno-invalid-offsetof', *[f'-I{d}' for d in includes], PROBE],
-            capture_output=True, text=True, check=False)
-        lines = re.findall(r'^\s*->(\w+) \$?(-?\d+) ?(.*)$', result.stdout, re.MULTILINE)
-        source = found
-        if result.returncode != 0 or not lines:
-            print(f'setup.py: {PROBE} did not compile against {includes[0]}:\n'
-                  f'{result.stderr[-2000:]}', file=sys.stderr)
-            lines, source = [], f'{PROBE} did not compile against {includes[0]}'
+        lines = probe(compiler, PROBE, includes, '-fno-access-control', '-Wno-invalid-offsetof')
+        source = found if lines else f'{PROBE} did not compile against {includes[0]}'
     else:
         source = 'no C++ compiler' if includes else found
+    rmw = rmw_include_dirs()
+    rmw_lines = probe(compiler, RMW_PROBE, rmw) if rmw and compiler else []
     values = {name: value for name, value, _ in lines}
     out = ['// Generated by setup.py from cft_action/native/_fastdds_layout.cpp: do not edit.',
            '#ifndef CFT_ACTION_FASTDDS_LAYOUT_H_', '#define CFT_ACTION_FASTDDS_LAYOUT_H_']
@@ -151,6 +173,7 @@ def layout_header(build_temp: Path) -> None:
                 for name, value, what in lines]
     else:
         out.append('#define CFT_LAYOUT_KNOWN 0')
+    out += [f'#define {name} {value}  // {what}' for name, value, what in rmw_lines]
     out.append(f'#define CFT_LAYOUT_SOURCE {c_string(source)}')
     # The include path itself, so that tests can compile their probes against the same headers.
     out.append('#define CFT_LAYOUT_INCLUDES '
@@ -214,21 +237,23 @@ def native_extension(name: str, own: Path, **options) -> Extension:
                      depends=sorted(str(h) for h in NATIVE.rglob('*.h')), **options)
 
 
-def fastdds3_layer() -> list[Extension]:
-    """The guard's Fast DDS 3 layer (native/guard/fastdds3/, C++), where Fast DDS 3.3+ headers and
-    their library are found: a library of its own, linked against that Fast DDS, which the guard
-    loads only into a process that has it loaded (native/guard/_guard_endpoints.c). None elsewhere
-    (the guard then says once why the layer is off)."""
+def fastdds3_layers() -> list[Extension]:
+    """The Fast DDS 3 layers (C++), where Fast DDS 3.3+ headers and their library are found: the
+    guard's (native/guard/fastdds3/, ``_cftguard_fastdds3``) and the client's (native/reader/
+    fastdds3/, ``_cftreader_fastdds3``), each a library of its own, linked against that Fast DDS,
+    which the guard (native/guard/_guard_endpoints.c) and cft_action._rcl load only into a process
+    that has it loaded. None elsewhere (each then says once why its layer is off)."""
     three = fastdds_include_dirs()[2]
     lib = layer_library(three)
     if lib is None:
         return []
-    layer = NATIVE / 'guard' / 'fastdds3'
-    return [Extension('cft_action._cftguard_fastdds3', sources=sources(layer, pattern='*.cpp'),
-                      include_dirs=[str(layer), *map(str, three)], library_dirs=[str(lib)],
-                      libraries=['fastdds'], language='c++',
-                      depends=sources(layer, pattern='*.h'),
-                      extra_compile_args=['-O2', '-std=c++17', '-fvisibility=hidden', '-Wall'])]
+    return [Extension(f'cft_action.{name}', sources=sources(layer, pattern='*.cpp'),
+                      include_dirs=[str(layer), str(NATIVE), *map(str, three)],
+                      library_dirs=[str(lib)], libraries=['fastdds'], language='c++',
+                      depends=sources(layer, NATIVE, pattern='*.h*'),
+                      extra_compile_args=['-O2', '-std=c++17', '-fvisibility=hidden', '-Wall'])
+            for name, layer in (('_cftguard_fastdds3', NATIVE / 'guard' / 'fastdds3'),
+                                ('_cftreader_fastdds3', NATIVE / 'reader' / 'fastdds3'))]
 
 
 setup(
@@ -241,5 +266,5 @@ setup(
             '-O2', '-fvisibility=hidden', '-fexceptions', '-Wall']),
         native_extension('_cftreader', NATIVE / 'reader',
                          extra_compile_args=['-O2', '-fvisibility=hidden', '-Wall']),
-    ] + fastdds3_layer(),
+    ] + fastdds3_layers(),
 )

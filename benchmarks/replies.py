@@ -16,13 +16,12 @@ server's ``cpu_s`` from ``go`` to the end, divided by the goals, is its CPU per 
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 from typing import Any
 
 from harness.cli import int_list
-from harness.report import add_results_arguments, markdown_only, markdown_table, results_start
+from harness.report import alternating_main, markdown_table
 from tests.test_replies import ports, replies_on_the_wire
 
 #: The issue's clients: three of the library's (default mode) and one plain, 3 goals each.
@@ -63,24 +62,16 @@ def markdown(result: dict[str, Any]) -> str:
 
 
 def main(argv: list[str]) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.split('\n\n')[0])
-    parser.add_argument('--rounds', type=int, default=3)
-    parser.add_argument('--result-pads', type=int_list, default=[0, 25000],
-                        help='int32 elements appended to each result')
-    parser.add_argument('--unguarded', action='store_true', help='also a server without the guard')
-    add_results_arguments(parser)
-    args = parser.parse_args(argv)
-    if markdown_only(args, markdown):
-        return
-    output, header = results_start('replies', args.out, argv)
-    configs = [c for c in CONFIGS if args.unguarded or c != 'unguarded']
-    result = {**header, 'clients': CLIENTS, 'configs': configs, 'result_pads': args.result_pads,
-              'runs': [measure(config, pad) for _ in range(args.rounds)
-                       for pad in args.result_pads for config in configs]}
-    output.parent.mkdir(parents=True, exist_ok=True)
-    output.write_text(json.dumps(result, indent=1))
-    print(markdown(result))
-    print(f'results: {output}')
+    def arguments(parser: argparse.ArgumentParser) -> None:
+        parser.add_argument('--result-pads', type=int_list, default=[0, 25000],
+                            help='int32 elements appended to each result')
+
+    def run(args: argparse.Namespace, configs: list[str]) -> dict[str, Any]:
+        return {'clients': CLIENTS, 'result_pads': args.result_pads,
+                'runs': [measure(config, pad) for _ in range(args.rounds)
+                         for pad in args.result_pads for config in configs]}
+
+    alternating_main('replies', argv, __doc__, arguments, list(CONFIGS), run, markdown)
 
 
 if __name__ == '__main__':

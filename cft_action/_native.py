@@ -17,7 +17,10 @@ READER_LOCK_LIBRARY = '_cftreader'
 #: The guard's Fast DDS 3 layer (native/guard/fastdds3/), built only against Fast DDS 3.3+ headers
 #: and dlopened by the guard, never by Python.
 GUARD_FASTDDS3_LIBRARY = '_cftguard_fastdds3'
-LIBRARIES = (GUARD_LIBRARY, READER_LOCK_LIBRARY, GUARD_FASTDDS3_LIBRARY)
+#: The client's Fast DDS 3 layer (native/reader/fastdds3/), built only against Fast DDS 3.3+ headers
+#: and loaded with ctypes by cft_action._rcl where that Fast DDS is loaded.
+READER_FASTDDS3_LIBRARY = '_cftreader_fastdds3'
+LIBRARIES = (GUARD_LIBRARY, READER_LOCK_LIBRARY, GUARD_FASTDDS3_LIBRARY, READER_FASTDDS3_LIBRARY)
 
 
 def extension_path(module: str) -> Optional[str]:

@@ -23,7 +23,7 @@ from rclpy import get_rmw_implementation_identifier, ok
 from rclpy.logging import get_logger
 
 from cft_action._rclpy_compat import RCLError
-from cft_action._native import extension_path, READER_LOCK_LIBRARY
+from cft_action._native import extension_path, READER_FASTDDS3_LIBRARY, READER_LOCK_LIBRARY
 from cft_action.errors import BindingUnavailable, ContentFilterError
 
 RCL_RET_OK = 0
@@ -202,6 +202,7 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'rcl_subscription_is_valid': (_rcl, ctypes.c_bool, [_void_p], None),
     'rcl_subscription_get_topic_name': (_rcl, ctypes.c_char_p, [_void_p], None),
     'rcl_publisher_get_rmw_handle': (_rcl, _void_p, [_void_p], None),
+    'rcl_subscription_get_rmw_handle': (_rcl, _void_p, [_void_p], None),
     # rmw's, found through librcl's dependencies (the wheels link rmw_fastrtps_cpp, apt's
     # rmw_implementation)
     'rmw_get_gid_for_publisher':
@@ -263,6 +264,9 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
                                        ctypes.c_int], None),
     'cft_status_table_count': (_reader_lock, ctypes.c_ulong, [_void_p, ctypes.c_int], None),
     'cft_status_table_number': (_reader_lock, ctypes.c_ulong, [_void_p], None),
+    'cft_fastdds3_layer_refused': (_reader_lock, ctypes.c_char_p, [], None),
+    'cft_fastdds3_reader_mark': (_reader_lock, ctypes.c_char_p, [], None),
+    'cft_fastdds3_writer_mark': (_reader_lock, ctypes.c_char_p, [], None),
     # The Python C API, to reach the C functions that rosidl generates for every message type.
     'PyCapsule_GetName': (ctypes.pythonapi, ctypes.c_char_p, [ctypes.py_object], None),
     'PyCapsule_GetPointer':
@@ -465,6 +469,84 @@ def writer_filters(gid: bytes) -> Optional[bool]:
     if _lib.cft_writer_is_marked(bytes(gid)[:16]):
         return True
     return False if _WRITER_MARKS_COMPLETE else None
+
+
+# --- the client's Fast DDS 3 layer (cft_action/native/reader/fastdds3/) ---------------------------
+
+#: rmw_fastrtps_cpp::get_datareader(rmw_subscription_t *), public
+#: (rmw_fastrtps_cpp/get_subscriber.hpp).
+_GET_DATAREADER = '_ZN16rmw_fastrtps_cpp14get_datareaderEP18rmw_subscription_s'
+
+
+class _Fastdds3Layer:
+    """The layer's functions, bound at the first use where it may be loaded; else why not."""
+
+    def __init__(self) -> None:
+        self.reason = ''
+        self.mark_reader: Any = None
+        self.marked_writers: Any = None
+        self.datareader: Any = None
+        if get_rmw_implementation_identifier() != 'rmw_fastrtps_cpp':
+            self.reason = f'{get_rmw_implementation_identifier()} is not rmw_fastrtps_cpp'
+            return
+        self.reason = (_lib.cft_fastdds3_layer_refused() or b'').decode('utf-8', 'replace')
+        if self.reason:
+            return
+        try:
+            layer = _load(extension_path(READER_FASTDDS3_LIBRARY) or READER_FASTDDS3_LIBRARY)
+            self.mark_reader = _map_symbol(layer, 'cft_fastdds3_mark_reader', ctypes.c_int32,
+                                           [_void_p, ctypes.c_char_p])
+            self.marked_writers = _map_symbol(layer, 'cft_fastdds3_marked_writers',
+                                              ctypes.c_int32, [_void_p, ctypes.c_char_p,
+                                                               ctypes.POINTER(ctypes.c_int32)])
+            self.datareader = _map_symbol(_load('librmw_fastrtps_cpp.so'), _GET_DATAREADER,
+                                          _void_p, [_void_p])
+        except BindingUnavailable as e:
+            self.reason = str(e)
+
+
+_fastdds3: Optional[_Fastdds3Layer] = None
+
+
+def _fastdds3_layer() -> _Fastdds3Layer:
+    global _fastdds3
+    if _fastdds3 is None:
+        _fastdds3 = _Fastdds3Layer()
+    return _fastdds3
+
+
+def _datareader(subscription_ptr: int) -> Optional[int]:
+    """The subscription's Fast DDS 3 DataReader (the layer is loaded)."""
+    _check_subscription(subscription_ptr)
+    rmw_subscription = _lib.rcl_subscription_get_rmw_handle(subscription_ptr)
+    return _fastdds3_layer().datareader(rmw_subscription) if rmw_subscription else None
+
+
+def mark_own_feedback_reader(subscription_ptr: int) -> str:
+    """Ask a guarded Fast DDS 3.3+ server for this feedback reader's own goals' feedback only: the
+    reader's USER_DATA gets the reader mark (native/_filter_class.h, CFT_READER_MARK;
+    DataReader::set_qos). Return why not, or
+    ``''``."""
+    layer = _fastdds3_layer()
+    if layer.reason:
+        return f"the client's Fast DDS 3 layer is off: {layer.reason}"
+    reader = _datareader(subscription_ptr)
+    if not reader:
+        return 'the subscription has no rmw_fastrtps_cpp DataReader'
+    ret = layer.mark_reader(reader, _lib.cft_fastdds3_reader_mark())
+    return f'DataReader::set_qos returned {ret}' if ret != 0 else ''
+
+
+def marked_writers(subscription_ptr: int) -> tuple[int, int]:
+    """``(marked, matched)``: of the writers the subscription's reader matches, how many say that
+    they filter (a guarded Fast DDS 3.3+ server's: CFT_WRITER_MARK); ``(0, -1)`` when Fast DDS
+    did not answer. The reader was marked by :func:`mark_own_feedback_reader`."""
+    reader = _datareader(subscription_ptr)
+    marked = ctypes.c_int32()
+    matched = _fastdds3_layer().marked_writers(
+        reader, _lib.cft_fastdds3_writer_mark(), ctypes.byref(marked)) if (
+        reader) else -1
+    return marked.value, matched
 
 
 def publisher_gid(publisher: int) -> bytes:

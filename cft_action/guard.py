@@ -20,7 +20,9 @@ Where it knows the Fast DDS, it also sends each of an action's goal, cancel and 
 to the response readers of the participant that sent the request (the others' take would discard
 it): see :func:`reply_counts`; ``CFT_GUARD_REPLIES=off`` sends every reply to every client, as
 rmw_fastrtps does. On Fast DDS 3.3+ (Lyrical) it does so through the writers' public sample
-prefilter, where the package was built against those headers: see :func:`prefilter`.
+prefilter, where the package was built against those headers: see :func:`prefilter`; there it
+also sends each of this library's clients only its own goals' feedback (:func:`feedback_counts`,
+``CFT_GUARD_FEEDBACK=off``).
 
 It only locks on a Fast DDS it knows (``libfastrtps.so.2.14``, ``libfastdds.so.3.6``,
 ``libfastdds.so.3.2``). On any other version it calls straight through and prints one line on
@@ -40,7 +42,8 @@ from cft_action.errors import CftActionError
 
 __all__ = ['GuardUnavailable', 'library_path', 'is_active', 'status', 'call_counts',
            'filter_counts', 'layout', 'prefilter', 'writer_limits', 'reply_counts',
-           'status_counts', 'environment', 'READER_FILTERS_ENV', 'REPLIES_ENV', 'STATUS_ENV']
+           'status_counts', 'feedback_counts', 'environment', 'READER_FILTERS_ENV', 'REPLIES_ENV',
+           'STATUS_ENV', 'FEEDBACK_ENV']
 
 #: Environment variable with the number of filtered readers that each writer of a guarded process
 #: filters for (1 to 4063; default 1024; Fast DDS's own limit is 32).
@@ -199,12 +202,13 @@ def layout() -> str:
 
 
 def prefilter() -> str:
-    """Return the state of the guard's Fast DDS 3 layer, which routes an action's replies with the
-    writers' public sample prefilter (Fast DDS 3.3+, Lyrical): ``'on: <its library>, built with
-    <headers>'``, or ``'off: <why>'`` (``CFT_GUARD_REPLIES`` off, not built against Fast DDS 3.3+
-    headers, another Fast DDS loaded, another rmw, or no action service created yet). Decided at
-    the first action service of a process of Fast DDS 3, and said once on stderr when off. An
-    empty string when the guard is not preloaded.
+    """Return the state of the guard's Fast DDS 3 layer, which routes an action's replies and
+    feedback with the writers' public sample prefilter (Fast DDS 3.3+, Lyrical): ``'on: <its
+    library>, built with <headers>'``, or ``'off: <why>'`` (``CFT_GUARD_REPLIES`` and
+    ``CFT_GUARD_FEEDBACK`` off, not built against Fast DDS 3.3+ headers, another Fast DDS loaded,
+    another rmw, or no action endpoint created yet). Decided at the first action service or
+    feedback publisher of a process of Fast DDS 3, and said once on stderr when off. An empty
+    string when the guard is not preloaded.
     """
     process = _preloaded()
     if process is None:
@@ -341,6 +345,33 @@ def reply_counts() -> dict[str, int]:
     An empty dict when the guard is not preloaded.
     """
     return _counters('cft_guard_reply_count', REPLY_COUNTERS)
+
+
+#: The counters of cft_guard_feedback_count() in _guard_feedback.c, in its order.
+FEEDBACK_COUNTERS = ('writers', 'verdicts', 'withheld', 'unknown', 'malformed')
+
+#: Environment variable that turns the Fast DDS 3 feedback prefilter off (``off`` or ``0``).
+FEEDBACK_ENV = 'CFT_GUARD_FEEDBACK'
+
+
+def feedback_counts() -> dict[str, int]:
+    """Return what the guard did with this process's action feedback on Fast DDS 3.3+.
+
+    There, an action's feedback writer gets a sample prefilter (public Fast DDS API) that sends the
+    library's clients, which mark their feedback reader's USER_DATA, only the feedback of the goals
+    their participant requested; every other reader gets every sample
+    (cft_action/native/guard/_guard_feedback.c). ``CFT_GUARD_FEEDBACK=off`` turns that off. On Fast
+    DDS 2.14 feedback is filtered through the content filter classes instead (:func:`filter_counts`)
+    and these stay 0. Keys:
+
+    - ``writers``: feedback writers given the prefilter (and the mark that says so);
+    - ``verdicts``: samples judged for marked readers; of those, ``withheld`` went not to the
+      reader (another participant's goal), ``unknown`` went to it because the goal's requester
+      was not recorded, ``malformed`` because the sample did not read as plain CDR.
+
+    An empty dict when the guard is not preloaded.
+    """
+    return _counters('cft_guard_feedback_count', FEEDBACK_COUNTERS)
 
 
 #: The counters of cft_guard_status_count() in _guard_status.c, in its order.

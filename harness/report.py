@@ -53,6 +53,38 @@ def results_start(benchmark: str, out: Optional[Path], argv: Optional[Sequence[s
                     'machine': environment_facts()}
 
 
+def results_end(output: Path, result: dict[str, Any],
+                present: Callable[[dict[str, Any]], str]) -> None:
+    """Write ``result`` to ``output`` (:func:`results_start`'s) and print ``present(result)`` and
+    where the file is."""
+    output.parent.mkdir(parents=True, exist_ok=True)
+    output.write_text(json.dumps(result, indent=1))
+    print(present(result))
+    print(f'results: {output}')
+
+
+def alternating_main(benchmark: str, argv: list[str], doc: str,
+                     add_arguments: Callable[[argparse.ArgumentParser], None],
+                     configs: Sequence[str],
+                     run: Callable[[argparse.Namespace, list[str]], dict[str, Any]],
+                     present: Callable[[dict[str, Any]], str]) -> None:
+    """The command line of a benchmark that runs server configurations side by side, alternating:
+    ``--rounds``, its own arguments (``add_arguments``), ``--unguarded`` (the configuration named
+    ``unguarded`` runs only with it), ``--out`` and ``--markdown``. ``run(args, chosen
+    configurations)`` gives the results' fields beyond the header and ``configs``."""
+    parser = argparse.ArgumentParser(description=doc.split('\n\n')[0])
+    parser.add_argument('--rounds', type=int, default=3)
+    add_arguments(parser)
+    parser.add_argument('--unguarded', action='store_true', help='also a server without the guard')
+    add_results_arguments(parser)
+    args = parser.parse_args(argv)
+    if markdown_only(args, present):
+        return
+    output, header = results_start(benchmark, args.out, argv)
+    chosen = [c for c in configs if args.unguarded or c != 'unguarded']
+    results_end(output, {**header, 'configs': chosen, **run(args, chosen)}, present)
+
+
 def say(*words: object) -> None:
     """A progress line, flushed at once (the runs take minutes, and their output is piped)."""
     print(*words, flush=True)

@@ -51,8 +51,9 @@ waits, and preemptions), ``guard``
 (the server guard's status line), ``guard_calls``, ``guard_filter``, ``guard_writers`` and
 ``guard_filter_class`` (its call, filter-verdict, writer-limit and filter-class counters),
 ``guard_replies`` (its reply filter's), ``guard_prefilter`` (its Fast DDS 3 layer's state,
-:func:`cft_action.guard.prefilter`) and ``writers`` (the GUIDs of the feedback and status
-writers, and of the ``send_goal``, ``cancel_goal`` and ``get_result`` reply writers, in hex).
+:func:`cft_action.guard.prefilter`), ``guard_feedback`` (its Fast DDS 3 feedback verdicts) and
+``writers`` (the GUIDs of the feedback and status writers, and of the ``send_goal``,
+``cancel_goal`` and ``get_result`` reply writers, in hex).
 ``GOALS <json>`` replies to the command ``goals``: the feedback messages published per goal so far,
 by goal UUID in hex (``k`` runs 0, 1, ... in a goal, so that is all of them). ``READERS <json>``
 replies to ``readers``: with ``--record-readers``, per goal UUID in hex, the GIDs (hex) of the
@@ -395,6 +396,7 @@ class TickingServer:
                     'guard_heartbeats': guard.heartbeat_counts(),
                     'guard_replies': guard.reply_counts(),
                     'guard_prefilter': guard.prefilter(),
+                    'guard_feedback': guard.feedback_counts(),
                     'guard_status': guard.status_counts()}
 
 

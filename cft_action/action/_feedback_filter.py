@@ -12,6 +12,7 @@ from __future__ import annotations
 
 from typing import Any, Callable, ContextManager, Iterable, NamedTuple, Optional
 
+from cft_action import _rcl
 from cft_action.topics._filtered_reader import FilteredReader
 from cft_action._rclpy_compat import PromptLogger
 from cft_action.topics.filters import ContentFilterOptions, MATCH_ALL
@@ -47,7 +48,10 @@ class FeedbackFilterState(NamedTuple):
         server), ``'none'`` (not filtered: rclpy drops it in Python), or ``'unknown'`` (no
         feedback has arrived yet, or this process discovered the server before its first use of
         cft_action, which then cannot read the server's discovery data, where a guarded server
-        says that it filters).
+        says that it filters). On Fast DDS 3.3+ the reader has no filter (``active`` is False) but
+        asks a guarded server for its own goals' feedback only: ``'writer'`` when every feedback
+        writer it matches says it filters, ``'none'`` when one does not (an unguarded server:
+        plain rclpy), ``'unknown'`` before it matches one.
     """
 
     mode: str
@@ -84,6 +88,9 @@ class FeedbackFilter:
         self._logger = logger
         self._logged_explicit_uuid = False
         self._logged_unguarded = False
+        # On Fast DDS 3.3+: the rclpy handle and rcl_subscription_t * of the feedback reader that
+        # asks a guarded server for its own goals' feedback only (_rcl.mark_own_feedback_reader).
+        self._own_feedback: Optional[tuple[ContextManager[Any], int]] = None
 
     def install(self, handle: ContextManager[Any], pointer: Optional[int], topic: str,
                 pointer_reason: str, cft_supported: bool) -> None:
@@ -100,11 +107,28 @@ class FeedbackFilter:
             self.reader.fall_back('the rmw implementation has no content filter')
         elif pointer is None:
             self.reader.fall_back(pointer_reason)
+        elif self.reader.filter_class and (why := _rcl.filter_class_status()):
+            self._ask_own_feedback(handle, pointer, why)
         else:
             plan = GoalFilterPlan(self.mode)
             if self.reader.install(handle, pointer, topic,
                                    ContentFilterOptions(plan.initial(), [])):
                 self.plan = plan
+
+    def _ask_own_feedback(self, handle: ContextManager[Any], pointer: int, why: str) -> None:
+        """Where the library's filter class cannot be used (Fast DDS 3): on Fast DDS 3.3+, mark the
+        reader so that a guarded server sends it only its own goals' feedback; else plain rclpy."""
+        with handle:
+            refused = _rcl.mark_own_feedback_reader(pointer)
+        unfiltered = f'the {self.reader.filter_class} filter class cannot be used here ({why})'
+        if refused:
+            self.reader.fall_back(f'{unfiltered}, and {refused}')
+            return
+        self._own_feedback = (handle, pointer)
+        self.reader.fall_back(
+            f"{unfiltered}: the feedback reader asks a guarded server (Fast DDS 3.3+) for its own "
+            "goals' feedback only; an unguarded server sends all of it, as to plain rclpy",
+            log=False)
 
     def uuid_for(self, feedback: bool) -> Optional[bytes]:
         """A fresh UUID: one the filter matches for a goal with feedback, else one it does not.
@@ -185,7 +209,17 @@ class FeedbackFilter:
 
         :param writers: The GIDs of the server's feedback writers.
         """
-        return self.reader.filtered_in(feedback_taken, writers)
+        if self._own_feedback is None:
+            return self.reader.filtered_in(feedback_taken, writers)
+        handle, pointer = self._own_feedback
+        with self.reader.lock:
+            if self.reader.ended:
+                return 'unknown'
+            with handle:
+                marked, matched = _rcl.marked_writers(pointer)
+        if matched <= 0:
+            return 'unknown'
+        return 'writer' if marked == matched else 'none'
 
     def log_if_unguarded(self, feedback_taken: int, writers: Callable[[], Iterable[Any]]) -> None:
         """Say once that the server does not filter for this client, once there is evidence.
@@ -199,6 +233,12 @@ class FeedbackFilter:
         if where == 'unknown':
             return
         self._logged_unguarded = True  # asked and answered: once is enough
+        if where == 'none' and self._own_feedback is not None:
+            self._logger.info(
+                "the action server's writer does not filter this client's feedback (the server "
+                "does not run under 'cft-action guard'): other goals' feedback reaches this "
+                'client, which drops it in Python as plain rclpy does. Under the guard the server '
+                'would not send it (README, "What it saves")')
         if where != 'reader':
             return
         self._logger.info(

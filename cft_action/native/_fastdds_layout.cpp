@@ -23,12 +23,6 @@
 #include <fastdds/rtps/writer/StatefulWriter.h>
 #include <fastrtps/attributes/TopicAttributes.h>
 #include <cstddef>
-// rmw's service structures, for the guard's record of who requested each goal (_guard_status.c):
-// from rmw's headers where the build finds them beside Fast DDS's (the wheels, /opt/ros/jazzy).
-#if __has_include(<rmw/types.h>)
-#include <rmw/types.h>
-#define CFT_PROBE_RMW 1
-#endif
 
 using eprosima::fastdds::dds::DataWriterQos;
 using eprosima::fastdds::dds::IContentFilter;
@@ -128,11 +122,4 @@ void cft_fastdds_layout() {
          offsetof(DataWriterQos, writer_resource_limits_) +
              offsetof(WriterResourceLimitsQos, reader_filters_allocation),
          "DataWriterQos::writer_resource_limits().reader_filters_allocation");
-#ifdef CFT_PROBE_RMW
-  LAYOUT(RMW_SERVICE_NAME, offsetof(rmw_service_t, service_name), "rmw_service_t::service_name");
-  LAYOUT(RMW_INFO_WRITER_GUID,
-         offsetof(rmw_service_info_t, request_id) + offsetof(rmw_request_id_t, writer_guid),
-         "rmw_service_info_t::request_id.writer_guid (uint8_t[16])");
-  LAYOUT(RMW_GUID_SIZE, sizeof(((rmw_request_id_t *)0)->writer_guid), "RMW_GID_STORAGE_SIZE");
-#endif
 }

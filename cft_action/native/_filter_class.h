@@ -40,6 +40,10 @@
 // discovery data tells a reader's process which writers filter for it, since their samples carry
 // no filter signature for these classes (_writer_marks.c reads it).
 #define CFT_WRITER_MARK "cft_action=filters;"
+// What the library's client adds to its feedback reader's USER_DATA on Fast DDS 3.3+
+// (native/reader/fastdds3/): it asks a guarded server for its own goals' feedback only, which the
+// guard's prefilter then sends it (native/guard/_guard_feedback.c); other readers get every sample.
+#define CFT_READER_MARK "cft_action=own_feedback;"
 
 // A class's grammar: how an expression compiles to a program (one malloc'd block, or NULL outside
 // the grammar), and a program's verdict on a serialized sample (a SerializedPayload_t *). A class

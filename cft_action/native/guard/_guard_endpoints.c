@@ -31,7 +31,9 @@
 #include <string.h>
 
 #include "_fastdds_layout.h"
+#include "_filter_class.h"
 #include "_guard_families.h"
+#include "_guard_feedback.h"
 #include "_guard_log.h"
 #include "_guard_replies.h"
 #include "fastdds3/_prefilter.h"
@@ -47,34 +49,62 @@
 #define SERVICE_INIT "rcl_service_init"
 #define SERVICE_RMW_HANDLE "rcl_service_get_rmw_handle"
 #define SERVICE_NAME "rcl_service_get_service_name"
+#define PUBLISHER_INIT "rcl_publisher_init"
+#define PUBLISH "rcl_publish"
+#define PUBLISHER_RMW_HANDLE "rcl_publisher_get_rmw_handle"
+#define PUBLISHER_TOPIC "rcl_publisher_get_topic_name"
 #define RESPONSE_WRITER "_ZN16rmw_fastrtps_cpp23get_response_datawriterEP13rmw_service_s"
+#define DATAWRITER "_ZN16rmw_fastrtps_cpp14get_datawriterEP15rmw_publisher_s"
 // This library's file name starts with GUARD_NAME; the layer's, in the same folder, with
 // LAYER_NAME, the rest being the same (the Python extension suffix).
 #define GUARD_NAME "_cftguard"
 #define LAYER_NAME "_cftguard_fastdds3"
 
-typedef int32_t (*service_init_fn)(void *service, const void *node, const void *type_support,
-                                   const char *service_name, const void *options);
+// rcl_service_init's and rcl_publisher_init's: (endpoint, node, type support, name, options).
+typedef int32_t (*init_fn)(void *endpoint, const void *node, const void *type_support,
+                           const char *name, const void *options);
 typedef void *(*handle_fn)(const void *object);
 typedef const char *(*name_fn)(const void *object);
+typedef int32_t (*publish_fn)(const void *publisher, const void *message, void *allocation);
 
 static struct {
-  service_init_fn init;
+  init_fn init;
   handle_fn rmw_handle;
   name_fn name;
+  init_fn publisher_init;
+  publish_fn publish;
+  handle_fn publisher_rmw_handle;
+  name_fn topic;
 } rcl;
 static pthread_once_t rcl_once = PTHREAD_ONCE_INIT;
+static void resolve_rcl(void);
+
+// Says that rcl has no definition of `name` after the guard's: rcl's error code.
+static int32_t missing(const char *name) {
+  cft_say("no %s after the guard's: it cannot be done", name);
+  return 1;  // RCL_RET_ERROR
+}
+
 static void resolve_rcl(void) {
-  rcl.init = (service_init_fn)cft_guard_loaded_symbol(SERVICE_INIT, "librcl");
+  rcl.init = (init_fn)cft_guard_loaded_symbol(SERVICE_INIT, "librcl");
   rcl.rmw_handle = (handle_fn)cft_guard_loaded_symbol(SERVICE_RMW_HANDLE, "librcl");
   rcl.name = (name_fn)cft_guard_loaded_symbol(SERVICE_NAME, "librcl");
+  rcl.publisher_init = (init_fn)cft_guard_loaded_symbol(PUBLISHER_INIT, "librcl");
+  rcl.publish = (publish_fn)cft_guard_loaded_symbol(PUBLISH, "librcl");
+  rcl.publisher_rmw_handle = (handle_fn)cft_guard_loaded_symbol(PUBLISHER_RMW_HANDLE, "librcl");
+  rcl.topic = (name_fn)cft_guard_loaded_symbol(PUBLISHER_TOPIC, "librcl");
 }
 
 // ---- the Fast DDS 3 layer -----------------------------------------------------------------------
-static char layer_state[640] = "off: no action service created yet";
+// Written once by load_layer (then published with release), read from any thread.
+static char layer_text[640];
+static const char *layer_state = "off: no action endpoint created yet";
 static struct {
   cft_fastdds3_route_replies_fn route_replies;
+  cft_fastdds3_route_feedback_fn route_feedback;
+  cft_fastdds3_feedback_readers_fn feedback_readers;
   handle_fn response_writer;
+  handle_fn datawriter;
 } layer;
 static pthread_once_t layer_once = PTHREAD_ONCE_INIT;
 
@@ -104,37 +134,53 @@ static void load_layer(void) {
     snprintf(why, sizeof why, "the loaded Fast DDS is not %s, the one the layer was built with",
              CFT_FASTDDS3_SONAME);
   } else if ((layer.response_writer = (handle_fn)cft_guard_loaded_symbol(
-                  RESPONSE_WRITER, "rmw_fastrtps_cpp")) == NULL) {
-    snprintf(why, sizeof why, "no rmw_fastrtps_cpp::get_response_datawriter is loaded (another "
-             "rmw implementation)");
+                  RESPONSE_WRITER, "rmw_fastrtps_cpp")) == NULL ||
+             (layer.datawriter = (handle_fn)cft_guard_loaded_symbol(
+                  DATAWRITER, "rmw_fastrtps_cpp")) == NULL) {
+    snprintf(why, sizeof why, "no rmw_fastrtps_cpp::get_response_datawriter or get_datawriter is "
+             "loaded (another rmw implementation)");
   } else if (!layer_path(path, sizeof path)) {
     snprintf(why, sizeof why, "the guard library's file name does not start with %s", GUARD_NAME);
   } else {
     // Kept open for the process's life: the prefilters' code is in it.
     void *handle = dlopen(path, RTLD_LAZY | RTLD_LOCAL);
-    layer.route_replies = handle != NULL ? (cft_fastdds3_route_replies_fn)dlsym(
-                                               handle, CFT_FASTDDS3_ROUTE_REPLIES) : NULL;
-    if (layer.route_replies == NULL)
+    if (handle != NULL) {
+      layer.route_replies =
+          (cft_fastdds3_route_replies_fn)dlsym(handle, CFT_FASTDDS3_ROUTE_REPLIES);
+      layer.route_feedback =
+          (cft_fastdds3_route_feedback_fn)dlsym(handle, CFT_FASTDDS3_ROUTE_FEEDBACK);
+      layer.feedback_readers =
+          (cft_fastdds3_feedback_readers_fn)dlsym(handle, CFT_FASTDDS3_FEEDBACK_READERS);
+    }
+    if (layer.route_replies == NULL || layer.route_feedback == NULL ||
+        layer.feedback_readers == NULL) {
       snprintf(why, sizeof why, "cannot load %.250s: %.150s", path, dlerror());
+      layer.route_replies = NULL, layer.route_feedback = NULL;
+    }
   }
   if (why[0] != '\0') {
-    snprintf(layer_state, sizeof layer_state, "off: %s", why);
-    cft_say("the Fast DDS 3 layer is off: %s; replies go to every client", why);
+    snprintf(layer_text, sizeof layer_text, "off: %s", why);
+    cft_say("the Fast DDS 3 layer is off: %s; replies and feedback go to every client", why);
   } else {
-    snprintf(layer_state, sizeof layer_state, "on: %.250s, built with %.300s", path,
+    snprintf(layer_text, sizeof layer_text, "on: %.250s, built with %.300s", path,
              CFT_FASTDDS3_SOURCE);
   }
+  __atomic_store_n(&layer_state, layer_text, __ATOMIC_RELEASE);
+}
+
+// Whether an endpoint that rcl made (`is_action`: one of an action's that the guard routes) gets
+// the layer: in a process of Fast DDS 3, where the layer loads (at the first such endpoint).
+static bool layer_for(bool is_action) {
+  if (!is_action || cft_loaded_family() != 1) return false;
+  pthread_once(&layer_once, load_layer);
+  return layer.route_replies != NULL;
 }
 
 // A service that rcl made: an action's, in a process of Fast DDS 3, gets its replies routed.
 static void service_created(const void *service) {
-  if (cft_loaded_family() != 1 || !cft_replies_wanted() || rcl.name == NULL ||
-      rcl.rmw_handle == NULL)
-    return;
+  if (!cft_replies_wanted() || rcl.name == NULL || rcl.rmw_handle == NULL) return;
   const char *name = rcl.name(service);
-  if (!cft_replies_is_action_service(name)) return;
-  pthread_once(&layer_once, load_layer);
-  if (layer.route_replies == NULL) return;
+  if (!layer_for(cft_replies_is_action_service(name))) return;
   void *writer = layer.response_writer(rcl.rmw_handle(service));
   int32_t ret = writer != NULL ? layer.route_replies(writer, cft_reply_verdict) : -1;
   if (ret == 0)
@@ -147,20 +193,113 @@ static void service_created(const void *service) {
 
 CFT_EXPORT int32_t rcl_service_init(void *service, const void *node, const void *type_support,
                                     const char *service_name, const void *options);
+// rcl's rcl_service_init (`service`) or rcl_publisher_init, then service_created or
+// publisher_created for the endpoint when it was made.
+static void publisher_created(const void *publisher);
+static int32_t init_endpoint(bool service, void *endpoint, const void *node,
+                             const void *type_support, const char *name, const void *options) {
+  pthread_once(&rcl_once, resolve_rcl);
+  init_fn real = service ? rcl.init : rcl.publisher_init;
+  if (real == NULL) return missing(service ? SERVICE_INIT : PUBLISHER_INIT);
+  int32_t ret = real(endpoint, node, type_support, name, options);
+  if (ret == 0) (service ? service_created : publisher_created)(endpoint);
+  return ret;
+}
+
 int32_t rcl_service_init(void *service, const void *node, const void *type_support,
                          const char *service_name, const void *options) {
-  pthread_once(&rcl_once, resolve_rcl);
-  if (rcl.init == NULL) {
-    cft_say("no rcl_service_init after the guard's: a service cannot be created");
-    return 1;  // RCL_RET_ERROR
+  return init_endpoint(true, service, node, type_support, service_name, options);
+}
+
+// ---- feedback publishers ----------------------------------------------------------------------------
+// The routed feedback publishers (rcl_publisher_t *, never read) with the layer's handle: a few per
+// process (one per action server); past ROUTED_MAX, a feedback writer stays as rmw made it, said.
+#define ROUTED_MAX 64
+static struct {
+  const void *publisher;
+  void *routing;
+} routed[ROUTED_MAX];
+static int routed_count;
+static pthread_mutex_t routed_lock = PTHREAD_MUTEX_INITIALIZER;
+
+// The routing of `publisher`, or NULL.
+static void *routing_of(const void *publisher) {
+  void *routing = NULL;
+  pthread_mutex_lock(&routed_lock);
+  for (int i = 0; i < routed_count && routing == NULL; i++)
+    if (routed[i].publisher == publisher) routing = routed[i].routing;
+  pthread_mutex_unlock(&routed_lock);
+  return routing;
+}
+
+// `publisher` is (routing != NULL) or is no longer (NULL) a routed feedback publisher: an address
+// that rcl reuses for another publisher forgets the routing of the one before.
+static bool set_routing(const void *publisher, void *routing) {
+  bool stored = routing == NULL;
+  pthread_mutex_lock(&routed_lock);
+  // routed_count is read without the lock too (rcl_publish's quick test): stored atomically.
+  for (int i = 0; i < routed_count; i++) {
+    if (routed[i].publisher != publisher) continue;
+    routed[i] = routed[routed_count - 1];
+    __atomic_store_n(&routed_count, routed_count - 1, __ATOMIC_RELEASE);
+    break;  // a publisher is stored once
   }
-  int32_t ret = rcl.init(service, node, type_support, service_name, options);
-  if (ret == 0) service_created(service);
-  return ret;
+  if (routing != NULL && routed_count < ROUTED_MAX) {
+    routed[routed_count].publisher = publisher, routed[routed_count].routing = routing;
+    __atomic_store_n(&routed_count, routed_count + 1, __ATOMIC_RELEASE);
+    stored = true;
+  }
+  pthread_mutex_unlock(&routed_lock);
+  return stored;
+}
+
+// A publisher that rcl made: an action's feedback publisher, in a process of Fast DDS 3, gets its
+// samples routed.
+static void publisher_created(const void *publisher) {
+  if (__atomic_load_n(&routed_count, __ATOMIC_ACQUIRE) > 0) set_routing(publisher, NULL);
+  if (!cft_feedback_wanted() || rcl.topic == NULL || rcl.publisher_rmw_handle == NULL) return;
+  const char *topic = rcl.topic(publisher);
+  if (!layer_for(cft_feedback_is_topic(topic))) return;
+  void *writer = layer.datawriter(rcl.publisher_rmw_handle(publisher));
+  int32_t error = -1;
+  void *routing = writer != NULL ? layer.route_feedback(writer, cft_feedback_verdict,
+                                                        CFT_READER_MARK, CFT_WRITER_MARK, &error)
+                                 : NULL;
+  if (routing != NULL && set_routing(publisher, routing))
+    cft_feedback_writer_routed();
+  else
+    cft_say("the feedback of %.200s goes to every client: %s (%d)", topic,
+            writer == NULL ? "it has no rmw_fastrtps_cpp writer"
+            : routing == NULL ? "its DataWriter refused the prefilter or the mark"
+                              : "too many feedback publishers", (int)error);
+}
+
+CFT_EXPORT int32_t rcl_publisher_init(void *publisher, const void *node, const void *type_support,
+                                      const char *topic_name, const void *options);
+int32_t rcl_publisher_init(void *publisher, const void *node, const void *type_support,
+                           const char *topic_name, const void *options) {
+  return init_endpoint(false, publisher, node, type_support, topic_name, options);
+}
+
+// Before a write of a routed feedback publisher, on the publishing thread, outside Fast DDS: the
+// layer learns which of its writer's readers carry the mark.
+CFT_EXPORT int32_t rcl_publish(const void *publisher, const void *ros_message, void *allocation);
+int32_t rcl_publish(const void *publisher, const void *ros_message, void *allocation) {
+  pthread_once(&rcl_once, resolve_rcl);
+  if (rcl.publish == NULL) return missing(PUBLISH);
+  void *routing = __atomic_load_n(&routed_count, __ATOMIC_ACQUIRE) > 0 ? routing_of(publisher)
+                                                                        : NULL;
+  if (routing != NULL) {
+    void *writer = layer.datawriter(rcl.publisher_rmw_handle(publisher));
+    if (writer != NULL) layer.feedback_readers(routing, writer);
+  }
+  return rcl.publish(publisher, ros_message, allocation);
 }
 
 // ---- the C API, for ctypes -----------------------------------------------------------------------------
 // The Fast DDS 3 layer's state: "on: ..." or "off: <why>".
 CFT_EXPORT const char *cft_guard_prefilter_state(void) {
-  return cft_replies_wanted() ? layer_state : "off: CFT_GUARD_REPLIES is off";
+  if (!cft_replies_wanted() && !cft_feedback_wanted())
+    return "off: CFT_GUARD_REPLIES and CFT_GUARD_FEEDBACK are off";
+  return __atomic_load_n(&layer_state, __ATOMIC_ACQUIRE);
 }

@@ -7,14 +7,16 @@
 // _guard_filter.c (the DDS-SQL accelerator), _guard_writer_qos.c (the writers' limit of filtered
 // readers), _guard_heartbeats.c (which readers a filtered writer's HEARTBEATs and GAPs reach),
 // _guard_replies.c (an action's replies go to the requesting participant), _guard_status.c (the
-// status filter), _guard_endpoints.c (rcl's services, handed to the loaded family's layer),
-// _guard_log.c (logging) and the filter classes (_filter_class.c, _uuid_program.c,
-// _node_program.c, _rate_program.c); setup.py builds them into one library. The Fast DDS 3.3+
-// layer, fastdds3/ (C++, public API only), is a library of its own that _guard_endpoints.c loads.
-// Calls go one way: _guard.c -> _guard_replies.c -> _guard_filter.c -> _guard_status.c and
-// _filter_class.c; _guard_endpoints.c -> _guard_replies.c and fastdds3/ (which calls back only the
-// decision it is given); _guard_writer_qos.c and _guard_heartbeats.c -> _guard_status.c; every
-// part -> _guard_families.c -> _guard_log.c.
+// status filter), _guard_goals.c (whose goal is it), _guard_feedback.c (the feedback verdict of
+// Fast DDS 3), _guard_endpoints.c (rcl's services and feedback publishers, handed to the loaded
+// family's layer), _guard_log.c (logging) and the filter classes (_filter_class.c,
+// _uuid_program.c, _node_program.c, _rate_program.c); setup.py builds them into one library. The
+// Fast DDS 3.3+ layer, fastdds3/ (C++, public API only), is a library of its own that
+// _guard_endpoints.c loads. Calls go one way: _guard.c -> _guard_replies.c -> _guard_filter.c ->
+// _guard_status.c and _filter_class.c; _guard_endpoints.c -> _guard_replies.c, _guard_feedback.c
+// and fastdds3/ (which calls back only the decisions it is given); _guard_status.c and
+// _guard_feedback.c -> _guard_goals.c; _guard_writer_qos.c and _guard_heartbeats.c ->
+// _guard_status.c; every part -> _guard_families.c -> _guard_log.c.
 #ifndef CFT_ACTION_GUARD_FAMILIES_H_
 #define CFT_ACTION_GUARD_FAMILIES_H_
 

@@ -12,15 +12,10 @@
 // relevant for the reader (DataWriterImpl::is_relevant, once per change and reader of a reliable
 // writer, in the write).
 //
-// Whose goal is it. The server takes each goal request through rmw_take_request (rcl_action's
-// rcl_action_take_goal_request -> rcl_take_request), which is interposed here: for a service whose
-// name ends in `/_action/send_goal`, the request's first member is its goal_id (the C and the C++
-// type support both put the UUID's 16 bytes first), and the request header's writer GUID names
-// the client's participant (its first 12 bytes, the GUID prefix, are every endpoint's of that
-// participant). The layouts of rmw_service_t and rmw_service_info_t come from rmw's headers
-// (_fastdds_layout.cpp); without them the filter is off. A status entry goes to a reader if its
-// goal's requester has the reader's GUID prefix, or is not known (a goal taken before the record
-// was cleared, see below): so no goal of a client is ever hidden from it.
+// Whose goal is it: _guard_goals.c records the participant that requested each goal. A status
+// entry goes to a reader if its goal's requester has the reader's GUID prefix, or is not known (a
+// goal taken before the record was cleared, or without rmw's layouts): so no goal of a client is
+// ever hidden from it.
 //
 // When a sample passes. The reader's record holds the status of each of its goals in the last
 // sample it was passed. A sample passes if it lists one of the reader's goals with another status
@@ -75,16 +70,14 @@
 // restarted, so that a wait already running ends too. CFT_GUARD_STATUS_HEARTBEAT_MS sets the
 // period (1 to 3000 ms; `off` leaves Fast DDS's).
 //
-// The requesters' record holds REQUESTER_SLOTS / 2 goals; when it is full it is cleared, and the
-// goals taken before then count as anyone's (every kept reader is passed their changes) until the
-// server forgets them. A kept reader's record grows with its own goals only.
+// A kept reader's record grows with its own goals only.
 //
 // Soundness rules:
 // - Only where _guard.c locks the Fast DDS 2.14 it knows, with its layouts and rmw's from headers.
 // - Only a reader of `rt/.../_action/status` of type action_msgs::msg::dds_::GoalStatusArray_.
 // - A sample that does not read as plain CDR GoalStatusArray passes, and empties the record.
 // - The interposed Fast DDS members always call the real ones, found in the library that called
-//   them; rmw_take_request calls the next definition after the guard's.
+//   them.
 // - CFT_GUARD_STATUS=off (or 0) turns this file off: every status sample goes to every reader.
 // - An owed sample is deferred only where the headers gave CC_SEQUENCE and CFR_UNACKNOWLEDGED.
 
@@ -101,6 +94,7 @@
 #include "_fastdds_layout.h"
 #include "_filter_class.h"
 #include "_guard_families.h"
+#include "_guard_goals.h"
 #include "_guard_log.h"
 #include "_guard_status.h"
 
@@ -119,18 +113,14 @@
 #define FROM_UNSENT \
   "_ZN8eprosima8fastrtps4rtps11ReaderProxy21from_unsent_to_statusERKNS1_16SequenceNumber_tE" \
   "NS1_23ChangeForReaderStatus_tEbb"
-#define TAKE_REQUEST "rmw_take_request"
 
 #define STATUS_TOPIC_PREFIX "rt/"
 #define STATUS_TOPIC_SUFFIX "/_action/status"
 #define STATUS_TYPE "action_msgs::msg::dds_::GoalStatusArray_"
-#define GOAL_SERVICE_SUFFIX "/_action/send_goal"
-#define UUID_SIZE 16
-#define PREFIX_SIZE 12
+#define UUID_SIZE CFT_UUID_SIZE
 
 #if CFT_LAYOUT_KNOWN && defined(RMW_SERVICE_NAME) && defined(RMW_INFO_WRITER_GUID)
 #define STATUS_LAYOUT_KNOWN 1
-_Static_assert(RMW_GUID_SIZE == 16, "rmw's writer_guid is not a 16-byte GUID");
 #else
 #define STATUS_LAYOUT_KNOWN 0
 #endif
@@ -156,19 +146,19 @@ _Static_assert(RMW_GUID_SIZE == 16, "rmw's writer_guid is not a 16-byte GUID");
 #define STATUS_HEARTBEAT_MS 100
 
 enum {
-  REQUESTS,     // goal requests recorded with their requester
-  IMPLAUSIBLE,  // goal requests whose header did not read as a user endpoint's GUID
+  REQUESTS,     // goal requests recorded with their requester (_guard_goals.c's)
+  IMPLAUSIBLE,  // goal requests whose header did not read as a user endpoint's GUID (its)
   VERDICTS,     // verdicts for kept status readers
   CHANGED,      // of those, passed: a goal of the reader changed
   OWED,         // passed: owed, the reader's previous sample was replaced before its ack
   WITHHELD,     // not passed
   UNKNOWN,      // entries of goals whose requester was not known (passed to every reader)
   MALFORMED,    // samples that did not read as a GoalStatusArray (passed)
-  RESETS,       // times the requesters' record was full and cleared
+  RESETS,       // times the requesters' record was full and cleared (_guard_goals.c's)
   KEPT,         // status readers kept by _guard_filter.c (of its `kept`)
   DEFERRED,     // owed changes not sent with the write, left for the reader to ask for
   HEARTBEATS,   // status writers given STATUS_HEARTBEAT_MS
-  CONTESTED,    // goal requests for a goal UUID another participant had requested (not recorded)
+  CONTESTED,    // goal requests for a goal UUID another participant had requested (its)
   COUNTERS
 };
 static unsigned long counters[COUNTERS];
@@ -198,116 +188,6 @@ bool cft_status_keeps(const char *topic, const char *type) {
          ends_with(topic, STATUS_TOPIC_SUFFIX) && strcmp(type, STATUS_TYPE) == 0 && status_on();
 }
 
-static uint64_t mix(const uint8_t *uuid) {
-  uint64_t a, b;
-  memcpy(&a, uuid, 8);
-  memcpy(&b, uuid + 8, 8);
-  uint64_t h = (a ^ (b * 0x9E3779B97F4A7C15ull)) * 0xBF58476D1CE4E5B9ull;
-  return h ^ (h >> 31);
-}
-
-// ---- the requesters: goal UUID -> the requesting participant's GUID prefix -----------------------
-#define REQUESTER_SLOTS (1u << 16)
-struct requester {
-  uint8_t uuid[UUID_SIZE];
-  uint8_t prefix[PREFIX_SIZE];
-  bool used;
-};
-static struct requester *requesters;  // REQUESTER_SLOTS, allocated with the first request
-static pthread_mutex_t requesters_lock = PTHREAD_MUTEX_INITIALIZER;
-
-static struct requester *requester_slot(const uint8_t *uuid) {
-  unsigned mask = REQUESTER_SLOTS - 1;
-  for (unsigned i = (unsigned)mix(uuid) & mask;; i = (i + 1) & mask)
-    if (!requesters[i].used || memcmp(requesters[i].uuid, uuid, UUID_SIZE) == 0)
-      return &requesters[i];
-}
-
-#if STATUS_LAYOUT_KNOWN
-static unsigned requester_count;
-// The first request for a goal UUID names its requester: one from another participant with the
-// same UUID (which the server rejects, as a goal it already has) must not take the goal's status
-// from the client that requested it (any participant can read the goal UUIDs off the status
-// topic, and send such requests).
-static void record_requester(const uint8_t *uuid, const uint8_t *guid) {
-  bool contested = false;
-  pthread_mutex_lock(&requesters_lock);
-  if (requesters == NULL) requesters = calloc(REQUESTER_SLOTS, sizeof *requesters);
-  if (requesters != NULL) {
-    if (requester_count >= REQUESTER_SLOTS / 2) {
-      memset(requesters, 0, REQUESTER_SLOTS * sizeof *requesters);
-      requester_count = 0;
-      count(RESETS);
-    }
-    struct requester *r = requester_slot(uuid);
-    if (r->used && memcmp(r->prefix, guid, PREFIX_SIZE) != 0) {
-      contested = true;  // said below, outside the lock
-    } else {
-      if (!r->used) requester_count++;
-      memcpy(r->uuid, uuid, UUID_SIZE);
-      memcpy(r->prefix, guid, PREFIX_SIZE);
-      r->used = true;
-      count(REQUESTS);
-    }
-  }
-  pthread_mutex_unlock(&requesters_lock);
-  if (contested) {
-    count(CONTESTED);
-    static bool said;
-    if (cft_first(&said))
-      cft_say("a goal request for a goal that another participant had requested: the first "
-              "requester keeps the goal's status (the server rejects such a request; said once, "
-              "cft_action.guard.status_counts()['contested'] counts each)");
-  }
-}
-#endif
-
-// Called with requesters_lock held: the requester's prefix, or NULL when it is not known.
-static const uint8_t *requester_of(const uint8_t *uuid) {
-  if (requesters == NULL) return NULL;
-  const struct requester *r = requester_slot(uuid);
-  return r->used ? r->prefix : NULL;
-}
-
-// The definition of rmw_take_request that rcl would have called: rmw_implementation's (rclpy loads
-// it in a local scope, and the wheels rename it). Looked up once, outside Fast DDS.
-typedef int32_t (*take_request_fn)(const void *service, void *header, void *request, bool *taken);
-
-CFT_EXPORT int32_t rmw_take_request(const void *service, void *request_header, void *ros_request,
-                                    bool *taken);
-static take_request_fn real_take_request;
-static pthread_once_t take_request_once = PTHREAD_ONCE_INIT;
-static void resolve_take_request(void) {
-  real_take_request = (take_request_fn)cft_guard_loaded_symbol(TAKE_REQUEST, "rmw_implementation");
-}
-
-int32_t rmw_take_request(const void *service, void *request_header, void *ros_request,
-                         bool *taken) {
-  pthread_once(&take_request_once, resolve_take_request);
-  take_request_fn real = real_take_request;
-  if (real == NULL) {
-    cft_say("no rmw_take_request after the guard's: a service request cannot be taken");
-    return 1;  // RMW_RET_ERROR
-  }
-  int32_t ret = real(service, request_header, ros_request, taken);
-#if STATUS_LAYOUT_KNOWN
-  if (ret == 0 && taken != NULL && *taken && service != NULL && request_header != NULL &&
-      ros_request != NULL && status_on()) {
-    const char *name;
-    memcpy(&name, (const uint8_t *)service + RMW_SERVICE_NAME, sizeof name);
-    if (name != NULL && ends_with(name, GOAL_SERVICE_SUFFIX)) {
-      const uint8_t *guid = (const uint8_t *)request_header + RMW_INFO_WRITER_GUID;
-      uint8_t kind = guid[15];  // a user writer's (0x02, 0x03) or reader's (0x04, 0x07)
-      if (kind == 0x02 || kind == 0x03 || kind == 0x04 || kind == 0x07)
-        record_requester(ros_request, guid);
-      else
-        count(IMPLAUSIBLE);
-    }
-  }
-#endif
-  return ret;
-}
-
 // ---- a kept reader's record: its goals' statuses in the last sample it was passed ---------------
 struct record_slot {
   uint8_t uuid[UUID_SIZE];
@@ -328,7 +208,7 @@ static struct record *record_new(unsigned capacity) {
 
 static struct record_slot *record_find(struct record *r, const uint8_t *uuid) {
   unsigned mask = r->capacity - 1;
-  for (unsigned i = (unsigned)mix(uuid) & mask;; i = (i + 1) & mask)
+  for (unsigned i = (unsigned)cft_uuid_mix(uuid) & mask;; i = (i + 1) & mask)
     if (!r->slots[i].used || memcmp(r->slots[i].uuid, uuid, UUID_SIZE) == 0) return &r->slots[i];
 }
 
@@ -567,15 +447,13 @@ bool cft_status_verdict(void **program, const void *payload, const void *reader_
   }
   unsigned relevant = 0;
   bool changed = false;
-  pthread_mutex_lock(&requesters_lock);
   for (size_t i = 0, pos = 4; i < n; i++, pos = next_entry(pos)) {
-    const uint8_t *prefix = requester_of(body + pos);
-    if (prefix != NULL && memcmp(prefix, reader_guid, PREFIX_SIZE) != 0) continue;
-    if (prefix == NULL) count(UNKNOWN);
+    enum cft_goal_owner owner = cft_goal_owner(body + pos, reader_guid);
+    if (owner == CFT_GOAL_OTHERS) continue;
+    if (owner == CFT_GOAL_UNKNOWN) count(UNKNOWN);
     mine[relevant++] = pos;
     if (!changed && !records_this_status(r, body + pos, status_at(body, pos))) changed = true;
   }
-  pthread_mutex_unlock(&requesters_lock);
   bool passes = changed || is_owed;
   count(changed ? CHANGED : is_owed ? OWED : WITHHELD);
   if (!passes) return false;
@@ -698,5 +576,11 @@ void cft_status_reader_kept(void) {
 // samples, 8 resets of the requesters' record, 9 status readers kept, 10 owed changes deferred,
 // 11 status writers given the shorter heartbeat period, 12 contested goal requests.
 CFT_EXPORT unsigned long cft_guard_status_count(int which) {
-  return which >= 0 && which < COUNTERS ? __atomic_load_n(&counters[which], __ATOMIC_RELAXED) : 0;
+  static const int goals[COUNTERS] = {[REQUESTS] = CFT_GOALS_REQUESTS + 1,
+                                      [IMPLAUSIBLE] = CFT_GOALS_IMPLAUSIBLE + 1,
+                                      [RESETS] = CFT_GOALS_RESETS + 1,
+                                      [CONTESTED] = CFT_GOALS_CONTESTED + 1};
+  if (which < 0 || which >= COUNTERS) return 0;
+  if (goals[which] != 0) return cft_goals_count(goals[which] - 1);
+  return __atomic_load_n(&counters[which], __ATOMIC_RELAXED);
 }

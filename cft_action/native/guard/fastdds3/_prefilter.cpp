@@ -2,8 +2,9 @@
 //
 // The server guard's Fast DDS 3 layer: the guard's per-reader decisions, given to a Fast DDS 3.3+
 // writer through its public API. It decides nothing itself: which reader gets which sample is the
-// family-free parts' (_guard_replies.c's cft_reply_verdict, passed in); this file only carries
-// their answer to Fast DDS.
+// family-free parts' (_guard_replies.c's cft_reply_verdict, _guard_feedback.c's
+// cft_feedback_verdict, passed in); this file only carries their answer to Fast DDS, and tells
+// the feedback verdict which readers asked for it (their USER_DATA, read outside the prefilter).
 //
 // It stands on `DataWriter::set_sample_prefilter(std::shared_ptr<IContentFilter>)` (Fast DDS 3.3+,
 // fastdds/dds/publisher/DataWriter.hpp): the writer asks the prefilter, in
@@ -12,7 +13,7 @@
 // FilterSampleInfo (its sample identity and related sample identity), under the writer's own
 // filters mutex. A reader the prefilter refuses gets no DATA: a reliable one a GAP, as for any
 // content-filtered change. Nothing is written into the DATA (no filter signature). The prefilter
-// is not told a change's kind: a reply topic has no key, so every change of it is ALIVE.
+// is not told a change's kind: reply and feedback topics have no key, so every change is ALIVE.
 //
 // Built by setup.py only against Fast DDS 3.3+ headers, as its own library linked against that Fast
 // DDS (libfastdds.so.3.<minor>): its headers' constants have initializers that call into Fast DDS,
@@ -21,19 +22,35 @@
 
 #include "_prefilter.h"
 
+#include "_fastdds3_user_data.hpp"
+
+#include <chrono>
 #include <cstring>
 #include <exception>
+#include <map>
 #include <memory>
+#include <mutex>
+#include <string>
+#include <vector>
 
 #include <fastdds/dds/publisher/DataWriter.hpp>
+#include <fastdds/dds/publisher/qos/DataWriterQos.hpp>
 #include <fastdds/dds/topic/IContentFilter.hpp>
+#include <fastdds/rtps/builtin/data/SubscriptionBuiltinTopicData.hpp>
+#include <fastdds/rtps/common/InstanceHandle.hpp>
 
 namespace {
 
 using eprosima::fastdds::dds::DataWriter;
+using eprosima::fastdds::dds::DataWriterQos;
 using eprosima::fastdds::dds::IContentFilter;
+using eprosima::fastdds::dds::InstanceHandle_t;
+using eprosima::fastdds::dds::RETCODE_OK;
+using eprosima::fastdds::rtps::GUID_t;
+using eprosima::fastdds::rtps::SubscriptionBuiltinTopicData;
+using Clock = std::chrono::steady_clock;
 
-void guid_bytes(const eprosima::fastdds::rtps::GUID_t &guid, uint8_t out[16]) {
+void guid_bytes(const GUID_t &guid, uint8_t out[16]) {
   std::memcpy(out, guid.guidPrefix.value, 12);
   std::memcpy(out + 12, guid.entityId.value, 4);
 }
@@ -56,6 +73,72 @@ class ReplyRouting final : public IContentFilter {
   const cft_reply_verdict_fn verdict_;
 };
 
+// An action's feedback writer: each sample to every reader, except that a reader whose discovery
+// data carries the reader mark gets only what `verdict` does not refuse. Which readers carry it is
+// learnt outside the prefilter (readers()), never inside it: evaluate runs under the writer's
+// mutex, and DataWriter::get_matched_subscription_data takes the participant's discovery lock,
+// which the discovery thread holds when it takes writers' mutexes. A reader not known yet passes.
+class FeedbackRouting final : public IContentFilter {
+ public:
+  FeedbackRouting(cft_feedback_verdict_fn verdict, const char *reader_mark)
+      : verdict_(verdict), mark_(reader_mark) {}
+
+  bool evaluate(const SerializedPayload &payload, const FilterSampleInfo & /*info*/,
+                const GUID_t &reader_guid) const override {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      auto found = marked_.find(reader_guid);
+      if (found == marked_.end() || !found->second) return true;
+    }
+    uint8_t reader[16];
+    guid_bytes(reader_guid, reader);
+    return verdict_(payload.data, payload.length, reader) != 0;
+  }
+
+  // The readers `writer` matches, each marked or not; only those new since the last call are
+  // looked up, unless every one is due again. Returns how many are marked.
+  // One caller at a time (a writer may publish from several threads); another meanwhile returns
+  // -1 at once: the running one brings the knowledge up to date.
+  int32_t readers(DataWriter &writer) {
+    std::unique_lock<std::mutex> reading(reading_, std::try_to_lock);
+    if (!reading.owns_lock()) return -1;
+    std::vector<InstanceHandle_t> handles;
+    if (writer.get_matched_subscriptions(handles) != RETCODE_OK) return -1;
+    Clock::time_point now = Clock::now();
+    bool all = now - read_at_ >= std::chrono::milliseconds(CFT_FASTDDS3_REREAD_MS);
+    std::map<GUID_t, bool> known;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      known = marked_;
+    }
+    std::map<GUID_t, bool> fresh;
+    SubscriptionBuiltinTopicData data;
+    int32_t count = 0;
+    for (const InstanceHandle_t &handle : handles) {
+      GUID_t guid = eprosima::fastdds::rtps::iHandle2GUID(handle);
+      auto found = known.find(guid);
+      if (!all && found != known.end()) {
+        fresh.emplace(guid, found->second);
+      } else if (writer.get_matched_subscription_data(data, handle) == RETCODE_OK) {
+        fresh.emplace(guid, cft_action::user_data_holds(data.user_data.data_vec(), mark_.c_str()));
+      }  // else: unmatched meanwhile, or not known to discovery: not known (passes)
+      count += fresh.count(guid) != 0 && fresh[guid];
+    }
+    if (all) read_at_ = now;
+    std::lock_guard<std::mutex> lock(mutex_);
+    marked_.swap(fresh);
+    return count;
+  }
+
+ private:
+  const cft_feedback_verdict_fn verdict_;
+  const std::string mark_;
+  mutable std::mutex mutex_;
+  std::map<GUID_t, bool> marked_;  // under mutex_
+  std::mutex reading_;             // held by readers()
+  Clock::time_point read_at_;      // the readers' last full reading (under reading_)
+};
+
 }  // namespace
 
 extern "C" __attribute__((visibility("default"))) int32_t cft_fastdds3_route_replies(
@@ -65,5 +148,37 @@ extern "C" __attribute__((visibility("default"))) int32_t cft_fastdds3_route_rep
         std::make_shared<ReplyRouting>(verdict));
   } catch (const std::exception &) {  // no memory for the prefilter: the writer stays as it was
     return 1;                        // RETCODE_ERROR
+  }
+}
+
+// The handle is a FeedbackRouting that the writer shares (its prefilter): it lives as long as the
+// guard keeps the handle, which it does for the process's life (a few per action server).
+extern "C" __attribute__((visibility("default"))) void *cft_fastdds3_route_feedback(
+    void *datawriter, cft_feedback_verdict_fn verdict, const char *reader_mark,
+    const char *writer_mark, int32_t *error) {
+  auto *writer = static_cast<DataWriter *>(datawriter);
+  try {
+    auto routing = std::make_shared<FeedbackRouting>(verdict, reader_mark);
+    *error = writer->set_sample_prefilter(routing);
+    if (*error != RETCODE_OK) return nullptr;
+    DataWriterQos qos = writer->get_qos();
+    if (cft_action::append_mark(qos, writer_mark) && (*error = writer->set_qos(qos)) != RETCODE_OK) {
+      writer->set_sample_prefilter(nullptr);
+      return nullptr;
+    }
+    return new std::shared_ptr<FeedbackRouting>(routing);
+  } catch (const std::exception &) {  // no memory: the writer stays as it was
+    *error = 1;                       // RETCODE_ERROR
+    return nullptr;
+  }
+}
+
+extern "C" __attribute__((visibility("default"))) int32_t cft_fastdds3_feedback_readers(
+    void *handle, void *datawriter) {
+  try {
+    return (*static_cast<std::shared_ptr<FeedbackRouting> *>(handle))->readers(
+        *static_cast<DataWriter *>(datawriter));
+  } catch (const std::exception &) {  // no memory: what was known stays
+    return -1;
   }
 }

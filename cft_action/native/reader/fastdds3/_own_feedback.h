@@ -1,0 +1,27 @@
+// Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
+//
+// The client's Fast DDS 3 layer (_own_feedback.cpp, built as its own library, _cftreader_fastdds3):
+// what cft_action._rcl asks of it through ctypes.
+#ifndef CFT_ACTION_READER_FASTDDS3_OWN_FEEDBACK_H_
+#define CFT_ACTION_READER_FASTDDS3_OWN_FEEDBACK_H_
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+// Appends `mark` to the USER_DATA of `datareader` (an eprosima::fastdds::dds::DataReader *), unless
+// it holds it already (DataReader::set_qos: the reader's discovery data is sent again). Returns the
+// ReturnCode_t (0: done).
+int32_t cft_fastdds3_mark_reader(void *datareader, const char *mark);
+
+// Of the writers `datareader` matches, how many hold `mark` in their USER_DATA (*marked) and how
+// many there are (the return value; -1 when Fast DDS did not answer).
+int32_t cft_fastdds3_marked_writers(void *datareader, const char *mark, int32_t *marked);
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif  // CFT_ACTION_READER_FASTDDS3_OWN_FEEDBACK_H_
