@@ -164,8 +164,8 @@ FUZZ_SOURCES_rate := $(NATIVE)/_rate_program.c
 FUZZ_CLASSES := $(NATIVE)/_filter_class.c $(NATIVE)/_uuid_program.c $(NATIVE)/_node_program.c \
     $(NATIVE)/_rate_program.c
 FUZZ_SOURCES_filter_class := $(NATIVE)/reader/_status_trim.c $(FUZZ_CLASSES)
-FUZZ_SOURCES_guard_status := $(NATIVE)/guard/_guard_log.c $(NATIVE)/_endpoint_times.c \
-    fuzz/guard_stubs.c
+FUZZ_SOURCES_guard_status := $(NATIVE)/guard/_guard_goals.c $(NATIVE)/guard/_guard_log.c \
+    $(NATIVE)/_endpoint_times.c fuzz/guard_stubs.c
 FUZZ_SOURCES_guard_filter := $(NATIVE)/guard/_guard_status.c $(FUZZ_SOURCES_guard_status) \
     $(FUZZ_CLASSES)
 FUZZ_SOURCES_writer_marks := $(NATIVE)/reader/_patch.c

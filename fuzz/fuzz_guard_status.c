@@ -9,8 +9,8 @@
 // a NUL-ended expression; the reader's 16-byte GUID; a byte of flags (in a write's frame, owed);
 // then samples, each a 2-byte little-endian length and its bytes.
 //
-// The library's file is compiled into this one, for its static record of requesters, which each
-// input leaves empty.
+// The library's file is compiled into this one, for its statics; the record of requesters
+// (_guard_goals.c, linked) is emptied after each input.
 #include "_guard_status.c"  // NOLINT: the real source, not a copy
 
 #include "fuzz_common.h"
@@ -25,7 +25,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     uint8_t guid[16];
     fuzz_bytes(&in, uuids[i], UUID_SIZE);
     fuzz_bytes(&in, guid, sizeof guid);
-    record_requester(uuids[i], guid);
+    cft_goals_record(uuids[i], guid);
   }
   char *expression = fuzz_string(&in, NULL);
   void *program = cft_guard_status_grammar.compile(expression);
@@ -56,9 +56,7 @@ int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
     }
     free(sample);
   }
-  // The record of requesters is emptied again, newest first (linear probing finds each then).
-  for (int i = requests; i-- > 0;) memset(requester_slot(uuids[i]), 0, sizeof(struct requester));
-  requester_count = 0;
+  cft_goals_clear();
   free(program);
   free(expression);
   return 0;

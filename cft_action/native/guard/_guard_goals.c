@@ -83,18 +83,28 @@ enum cft_goal_owner cft_goal_owner(const uint8_t *uuid, const uint8_t *reader_gu
   return owner;
 }
 
-#if RMW_LAYOUT_KNOWN
 static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_RELAXED); }
 
-static unsigned requester_count;
-static void record_requester(const uint8_t *uuid, const uint8_t *guid) {
+static unsigned requester_count;  // under requesters_lock
+
+static void clear_locked(void) {
+  if (requesters != NULL) memset(requesters, 0, REQUESTER_SLOTS * sizeof *requesters);
+  requester_count = 0;
+}
+
+void cft_goals_clear(void) {
+  pthread_mutex_lock(&requesters_lock);
+  clear_locked();
+  pthread_mutex_unlock(&requesters_lock);
+}
+
+void cft_goals_record(const uint8_t *uuid, const uint8_t *guid) {
   bool contested = false;
   pthread_mutex_lock(&requesters_lock);
   if (requesters == NULL) requesters = calloc(REQUESTER_SLOTS, sizeof *requesters);
   if (requesters != NULL) {
     if (requester_count >= REQUESTER_SLOTS / 2) {
-      memset(requesters, 0, REQUESTER_SLOTS * sizeof *requesters);
-      requester_count = 0;
+      clear_locked();
       count(CFT_GOALS_RESETS);
     }
     struct requester *r = requester_slot(uuid);
@@ -119,6 +129,7 @@ static void record_requester(const uint8_t *uuid, const uint8_t *guid) {
   }
 }
 
+#if RMW_LAYOUT_KNOWN
 static bool ends_with(const char *s, const char *tail) {
   size_t n = strlen(s), m = strlen(tail);
   return n >= m && strcmp(s + n - m, tail) == 0;
@@ -155,7 +166,7 @@ int32_t rmw_take_request(const void *service, void *request_header, void *ros_re
       const uint8_t *guid = (const uint8_t *)request_header + RMW_INFO_WRITER_GUID;
       uint8_t kind = guid[15];  // a user writer's (0x02, 0x03) or reader's (0x04, 0x07)
       if (kind == 0x02 || kind == 0x03 || kind == 0x04 || kind == 0x07)
-        record_requester(ros_request, guid);
+        cft_goals_record(ros_request, guid);
       else
         count(CFT_GOALS_IMPLAUSIBLE);
     }

@@ -24,6 +24,14 @@ enum cft_goal_owner {
 };
 enum cft_goal_owner cft_goal_owner(const uint8_t *uuid, const uint8_t *reader_guid);
 
+// Records that the participant of the writer `guid` (16 bytes) requested the goal `uuid`, unless
+// another participant did first (counted and said once: CFT_GOALS_CONTESTED). rmw_take_request
+// records each goal request so; the fuzz harness of the status verdict too.
+void cft_goals_record(const uint8_t *uuid, const uint8_t *guid);
+
+// Forgets every request (as when the record is full).
+void cft_goals_clear(void);
+
 // A hash of a goal UUID's 16 bytes, for the open-addressing tables of goals.
 uint64_t cft_uuid_mix(const uint8_t *uuid);
 
