@@ -48,6 +48,7 @@
 #include "_filter_class.h"
 #include "_guard_log.h"
 #include "_guard_status.h"
+#include "_guard_text.h"
 #include "_uuid_program.h"
 
 __thread const void *cft_filtering_writer;
@@ -216,16 +217,11 @@ static bool located(const uint8_t *info, const uint8_t *guid) {
   return ok;
 }
 
-static bool ends_with(const char *s, const char *tail) {
-  size_t n = strlen(s), m = strlen(tail);
-  return n >= m && strcmp(s + n - m, tail) == 0;
-}
-
 // rosidl's DDS name of an action feedback message: <pkg>::action::dds_::<Name>_FeedbackMessage_.
 static bool is_feedback_type(const char *type) {
   const char *ns = strstr(type, "::action::dds_::");
   return ns != NULL && ns != type && strchr(ns + 16, ':') == NULL &&
-         ends_with(type, "_FeedbackMessage_");
+         cft_ends_with(type, "_FeedbackMessage_");
 }
 
 // What a reader's discovery data says about its filter, read through the checked layout.
@@ -297,7 +293,7 @@ static struct program *program_of(const uint8_t *info, const uint8_t *guid, bool
   if (!read_reader_filter(info, guid, &f, filtered)) return NULL;
   struct program *program = NULL;
   if (strcmp(f.class_name, "DDSSQL") == 0 && strncmp(f.related, "rt/", 3) == 0 &&
-      ends_with(f.related, "/_action/feedback") && is_feedback_type(f.type))
+      cft_ends_with(f.related, "/_action/feedback") && is_feedback_type(f.type))
     program = cft_uuid_compile(f.expression, f.params, f.param_count);
   if (cft_debug_enabled())
     cft_say("reader filter on %s (%s, %s): %s: %.200s", f.related, f.type, f.class_name,

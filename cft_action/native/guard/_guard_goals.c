@@ -32,6 +32,7 @@
 #include "_fastdds_layout.h"
 #include "_guard_families.h"
 #include "_guard_log.h"
+#include "_guard_text.h"
 
 #define TAKE_REQUEST "rmw_take_request"
 #define GOAL_SERVICE_SUFFIX "/_action/send_goal"
@@ -129,13 +130,6 @@ void cft_goals_record(const uint8_t *uuid, const uint8_t *guid) {
   }
 }
 
-#if RMW_LAYOUT_KNOWN
-static bool ends_with(const char *s, const char *tail) {
-  size_t n = strlen(s), m = strlen(tail);
-  return n >= m && strcmp(s + n - m, tail) == 0;
-}
-#endif
-
 // The definition of rmw_take_request that rcl would have called: rmw_implementation's (rclpy loads
 // it in a local scope, and the wheels rename it). Looked up once, outside Fast DDS.
 typedef int32_t (*take_request_fn)(const void *service, void *header, void *request, bool *taken);
@@ -162,7 +156,7 @@ int32_t rmw_take_request(const void *service, void *request_header, void *ros_re
       ros_request != NULL) {
     const char *name;
     memcpy(&name, (const uint8_t *)service + RMW_SERVICE_NAME, sizeof name);
-    if (name != NULL && ends_with(name, GOAL_SERVICE_SUFFIX)) {
+    if (name != NULL && cft_ends_with(name, GOAL_SERVICE_SUFFIX)) {
       const uint8_t *guid = (const uint8_t *)request_header + RMW_INFO_WRITER_GUID;
       uint8_t kind = guid[15];  // a user writer's (0x02, 0x03) or reader's (0x04, 0x07)
       if (kind == 0x02 || kind == 0x03 || kind == 0x04 || kind == 0x07)

@@ -97,6 +97,7 @@
 #include "_guard_goals.h"
 #include "_guard_log.h"
 #include "_guard_status.h"
+#include "_guard_text.h"
 
 #define CHANGE_REMOVED \
   "_ZN8eprosima8fastrtps4rtps11ReaderProxy23change_has_been_removedERKNS1_16SequenceNumber_tE"
@@ -170,11 +171,6 @@ static bool status_on(void) {
   return cft_guard_part_on(&on, "CFT_GUARD_STATUS", STATUS_LAYOUT_KNOWN);
 }
 
-static bool ends_with(const char *s, const char *tail) {
-  size_t n = strlen(s), m = strlen(tail);
-  return n >= m && strcmp(s + n - m, tail) == 0;
-}
-
 #if DEFER_LAYOUT_KNOWN
 // CFT_GUARD_DEFER_OWED: on unless "off" or "0", where the status filter is on.
 static bool defer_on(void) {
@@ -185,7 +181,7 @@ static bool defer_on(void) {
 
 bool cft_status_keeps(const char *topic, const char *type) {
   return topic != NULL && type != NULL && strncmp(topic, STATUS_TOPIC_PREFIX, 3) == 0 &&
-         ends_with(topic, STATUS_TOPIC_SUFFIX) && strcmp(type, STATUS_TYPE) == 0 && status_on();
+         cft_ends_with(topic, STATUS_TOPIC_SUFFIX) && strcmp(type, STATUS_TYPE) == 0 && status_on();
 }
 
 // ---- a kept reader's record: its goals' statuses in the last sample it was passed ---------------
