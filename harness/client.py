@@ -34,6 +34,11 @@ What it counts, from ``go`` on:
   (``GoalStatusArray``) taken from rcl, the goal entries they listed, the most in one, and their
   serialized size (:func:`status_array_size`; no headers). The status reader keeps the last sample
   only (rclpy's default QoS), so a client that falls behind takes fewer than the wire brought.
+- ``goal_responses``: goal responses taken from rcl (rmw passes this client's only);
+  ``terminal_listed``: this client's goals that the last status message taken lists as terminal.
+  ``goals_done`` is rclpy's view instead (its goal handles' status, rejections included): rclpy
+  sets a handle's status only from status messages taken after the goal's response, so a response
+  that arrives after the goal's terminal status leaves the handle non-terminal for good.
 - ``maxrss_kb`` and ``rss_kb``: this process's peak and current resident set.
 - ``send_s``, ``last_response_s`` and ``last_callback_s``: seconds from ``go`` until every goal was
   sent, until the last goal response, and until the last feedback callback.
@@ -105,6 +110,8 @@ class CountingMixin:
         self.foreign_taken = 0
         self.status_counts = dict.fromkeys(STATUS_COUNTERS, 0)
         self.status_max_entries = 0
+        self.goal_responses = 0
+        self.last_status: Any = None
         super().__init__(*args, **kwargs)
 
     def take_data(self) -> dict:
@@ -115,8 +122,11 @@ class CountingMixin:
                 self.own_taken += 1
             else:
                 self.foreign_taken += 1
+        if data.get('goal') is not None:
+            self.goal_responses += 1
         status = data.get('status')
         if status is not None:
+            self.last_status = status
             entries = len(status.status_list)
             self.status_counts['status'] += 1
             self.status_counts['status_entries'] += entries
@@ -215,6 +225,7 @@ class LoadClient:
         self.start_threads: dict[str, float] = {}
         self.start_counters: dict[str, Any] = {}
         self.start_status: dict[str, int] = {}
+        self.start_goal_responses = 0
         self.started = 0.0
 
     def on_feedback_for(self, goal_uuid: bytes) -> Callable[[Any], None]:
@@ -239,6 +250,7 @@ class LoadClient:
         self.start_threads = procstat.thread_cpu_s(os.getpid())
         self.start_counters = filter_counters(self.client)
         self.start_status = dict(self.client.status_counts)
+        self.start_goal_responses = self.client.goal_responses
         self.client.status_max_entries = 0
         self.started = time.monotonic()
         if self.interval_s > 0:
@@ -292,11 +304,20 @@ class LoadClient:
         if self.goals_done() == self.goals:
             self.terminal_s = time.monotonic() - self.started
 
+    def terminal_listed(self) -> int:
+        """This client's goals that the last status message taken from rcl lists as terminal."""
+        last = self.client.last_status
+        return 0 if last is None else sum(
+            entry.status in _TERMINAL and bytes(entry.goal_info.goal_id.uuid) in self.per_goal
+            for entry in last.status_list)
+
     def progress(self) -> dict[str, Any]:
         """The counters that tell the orchestrator whether data is still arriving."""
         status = {k: v - self.start_status.get(k, 0) for k, v in self.client.status_counts.items()}
         return {'own': self.client.own_taken, 'foreign': self.client.foreign_taken,
-                'callbacks': self.callbacks, 'goals_done': self.goals_done(), **status}
+                'callbacks': self.callbacks, 'goals_done': self.goals_done(),
+                'goal_responses': self.client.goal_responses - self.start_goal_responses,
+                'terminal_listed': self.terminal_listed(), **status}
 
     def report(self) -> dict[str, Any]:
         """Everything measured since ``go``."""
