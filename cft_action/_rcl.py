@@ -478,6 +478,16 @@ def writer_filters(gid: bytes) -> Optional[bool]:
 _GET_DATAREADER = '_ZN16rmw_fastrtps_cpp14get_datareaderEP18rmw_subscription_s'
 
 
+# The layer's symbols, bound where it may be loaded (by library: 'layer', or rmw_fastrtps_cpp's):
+# name: (library, restype, argtypes); their return codes are the callers' to read.
+_FASTDDS3_SYMBOLS: dict[str, tuple[str, Any, list[Any]]] = {
+    'cft_fastdds3_mark_reader': ('layer', ctypes.c_int32, [_void_p, ctypes.c_char_p]),
+    'cft_fastdds3_marked_writers':
+        ('layer', ctypes.c_int32, [_void_p, ctypes.c_char_p, ctypes.POINTER(ctypes.c_int32)]),
+    _GET_DATAREADER: ('librmw_fastrtps_cpp.so', _void_p, [_void_p]),
+}
+
+
 class _Fastdds3Layer:
     """The layer's functions, bound at the first use where it may be loaded; else why not."""
 
@@ -493,14 +503,12 @@ class _Fastdds3Layer:
         if self.reason:
             return
         try:
-            layer = _load(extension_path(READER_FASTDDS3_LIBRARY) or READER_FASTDDS3_LIBRARY)
-            self.mark_reader = _map_symbol(layer, 'cft_fastdds3_mark_reader', ctypes.c_int32,
-                                           [_void_p, ctypes.c_char_p])
-            self.marked_writers = _map_symbol(layer, 'cft_fastdds3_marked_writers',
-                                              ctypes.c_int32, [_void_p, ctypes.c_char_p,
-                                                               ctypes.POINTER(ctypes.c_int32)])
-            self.datareader = _map_symbol(_load('librmw_fastrtps_cpp.so'), _GET_DATAREADER,
-                                          _void_p, [_void_p])
+            libraries = {'layer': _load(extension_path(READER_FASTDDS3_LIBRARY) or
+                                        READER_FASTDDS3_LIBRARY),
+                         'librmw_fastrtps_cpp.so': _load('librmw_fastrtps_cpp.so')}
+            self.mark_reader, self.marked_writers, self.datareader = (
+                _map_symbol(libraries[library], name, restype, argtypes)
+                for name, (library, restype, argtypes) in _FASTDDS3_SYMBOLS.items())
         except BindingUnavailable as e:
             self.reason = str(e)
 

@@ -24,6 +24,7 @@
 #include <string.h>
 
 #include "_guard_goals.h"
+#include "_guard_text.h"
 
 #define FEEDBACK_SUFFIX "/_action/feedback"
 #define ENCAPSULATION_SIZE 4
@@ -38,8 +39,8 @@ bool cft_feedback_wanted(void) {
 }
 
 bool cft_feedback_is_topic(const char *topic) {
-  size_t n = topic != NULL ? strlen(topic) : 0, m = strlen(FEEDBACK_SUFFIX);
-  return n > m && strcmp(topic + n - m, FEEDBACK_SUFFIX) == 0;
+  return topic != NULL && strlen(topic) > strlen(FEEDBACK_SUFFIX) &&
+         cft_ends_with(topic, FEEDBACK_SUFFIX);
 }
 
 int cft_feedback_verdict(const uint8_t *data, uint32_t length, const uint8_t *reader_guid) {

@@ -96,25 +96,26 @@ class FeedbackRouting final : public IContentFilter {
   }
 
   // The readers `writer` matches, each marked or not; only those new since the last call are
-  // looked up, unless every one is due again. Returns how many are marked.
+  // looked up, unless every one is due again. Returns how many are marked. At nearly every write
+  // nothing changed: then the knowledge is not copied, only compared.
   // One caller at a time (a writer may publish from several threads); another meanwhile returns
   // -1 at once: the running one brings the knowledge up to date.
   int32_t readers(DataWriter &writer) {
     std::unique_lock<std::mutex> reading(reading_, std::try_to_lock);
     if (!reading.owns_lock()) return -1;
-    std::vector<InstanceHandle_t> handles;
-    if (writer.get_matched_subscriptions(handles) != RETCODE_OK) return -1;
+    if (writer.get_matched_subscriptions(handles_) != RETCODE_OK) return -1;
     Clock::time_point now = Clock::now();
     bool all = now - read_at_ >= std::chrono::milliseconds(CFT_FASTDDS3_REREAD_MS);
     std::map<GUID_t, bool> known;
     {
       std::lock_guard<std::mutex> lock(mutex_);
+      if (!all && knows_all()) return marked_count_;
       known = marked_;
     }
     std::map<GUID_t, bool> fresh;
     SubscriptionBuiltinTopicData data;
     int32_t count = 0;
-    for (const InstanceHandle_t &handle : handles) {
+    for (const InstanceHandle_t &handle : handles_) {
       GUID_t guid = eprosima::fastdds::rtps::iHandle2GUID(handle);
       auto found = known.find(guid);
       if (!all && found != known.end()) {
@@ -127,15 +128,26 @@ class FeedbackRouting final : public IContentFilter {
     if (all) read_at_ = now;
     std::lock_guard<std::mutex> lock(mutex_);
     marked_.swap(fresh);
+    marked_count_ = count;
     return count;
   }
 
  private:
+  // Whether the knowledge holds exactly the readers of handles_ (under mutex_ and reading_).
+  bool knows_all() const {
+    if (handles_.size() != marked_.size()) return false;
+    for (const InstanceHandle_t &handle : handles_)
+      if (marked_.count(eprosima::fastdds::rtps::iHandle2GUID(handle)) == 0) return false;
+    return true;
+  }
+
   const cft_feedback_verdict_fn verdict_;
   const std::string mark_;
   mutable std::mutex mutex_;
   std::map<GUID_t, bool> marked_;  // under mutex_
+  int32_t marked_count_ = 0;       // marked_'s marked readers (under mutex_)
   std::mutex reading_;             // held by readers()
+  std::vector<InstanceHandle_t> handles_;  // the last reading's (under reading_)
   Clock::time_point read_at_;      // the readers' last full reading (under reading_)
 };
 
