@@ -310,11 +310,13 @@ UDP_ONLY = {'FASTDDS_BUILTIN_TRANSPORTS': 'UDPv4', 'ROS_AUTOMATIC_DISCOVERY_RANG
 class WireRun(NamedTuple):
     """What :func:`clients_on_the_wire` saw: the clients' reports, in order; what ``capture``
     returned for the captured writers; the server's stats at ``go`` and at the end (its
-    ``writers`` name the GUIDs of its feedback, status and reply writers)."""
+    ``writers`` name the GUIDs of its feedback, status and reply writers); every line the server
+    printed."""
     reports: list[dict[str, Any]]
     captured: dict[int, Any]
     stats_at_go: dict[str, Any]
     stats_after: dict[str, Any]
+    server_lines: list[str]
 
 
 def clients_on_the_wire(clients: Sequence[Sequence[object]], capture: Callable[..., dict],
@@ -375,7 +377,7 @@ def clients_on_the_wire(clients: Sequence[Sequence[object]], capture: Callable[.
             sniffer.join(timeout=10)  # it fills captured as it ends
         stop_all(processes)
         server.stop()
-    return WireRun(reports, captured, at_go, after)
+    return WireRun(reports, captured, at_go, after, list(server.lines))
 
 
 def feedback_on_the_wire(clients: Sequence[tuple[str, str]], capture: Callable[..., dict],

@@ -1,9 +1,11 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
-"""Feedback on the wire on Fast DDS 3.3+ (Lyrical's 3.6.2, `make compat-kilted`): under the guard,
-each of the library's clients, whose feedback reader asks for its own goals' feedback only (a
-USER_DATA mark, cft_action/native/reader/fastdds3/), receives only its goals' feedback, through the
-feedback writer's public sample prefilter (cft_action/native/guard/fastdds3/, _guard_feedback.c);
-plain clients and monitors receive all.
+"""Feedback on the wire on Fast DDS 3.3+ (Lyrical's 3.6.2, `make compat-kilted`): under the guard
+with CFT_GUARD_FEEDBACK=on, each of the library's clients, whose feedback reader asks for its own
+goals' feedback only (a USER_DATA mark, cft_action/native/reader/fastdds3/), receives only its
+goals' feedback, through the feedback writer's public sample prefilter
+(cft_action/native/guard/fastdds3/, _guard_feedback.c); plain clients and monitors receive all. By
+default the guard leaves feedback as rmw_fastrtps sends it, and the library's clients behave as
+plain rclpy's.
 
 A server (its own process) serves three of the library's clients, a plain rclpy client and a
 plain rclpy client with no goals (a feedback monitor: its feedback reader gets every sample), each
@@ -33,6 +35,8 @@ LONG = 1000
 #: (mode, goals): three of the library's clients, a plain one, a monitor.
 CLIENTS = (('client', 2), ('client', 3), ('client', 4), ('rclpy', 2), ('rclpy', 0))
 LIBRARY = 3
+#: The server's environment that routes feedback (opt-in).
+ROUTED = {guard.FEEDBACK_ENV: 'on'}
 pytestmark = [
     pytest.mark.skipif(MISSING is not None, reason=MISSING or ''),
     pytest.mark.skipif(os.geteuid() != 0, reason='a raw socket needs root'),
@@ -69,7 +73,7 @@ def test_each_library_client_receives_only_its_own_feedback() -> None:
     client's and the monitor's every sample; the guard's layer is on, its feedback writer
     routed, and it withheld the others' samples from each library client; the clients say that
     the writer filters."""
-    run = feedback_run(guarded=True)
+    run = feedback_run(guarded=True, server_env=ROUTED)
     assert_every_client_took_its_feedback(run)
     assert filtered_in(run) == ['writer'] * LIBRARY, run.reports
     assert run.stats_after['guard_prefilter'].startswith('on: '), run.stats_after
@@ -97,12 +101,14 @@ def test_an_unguarded_server_sends_every_client_all_feedback() -> None:
     assert {len(uuids) for uuids in goals_by_port(run).values()} == {every}
 
 
-def test_with_the_feedback_prefilter_off_every_client_receives_all() -> None:
-    """CFT_GUARD_FEEDBACK=off: the guard leaves the feedback writer as rmw_fastrtps made it, and
-    the library's clients say that nothing filters."""
-    run = feedback_run(guarded=True, server_env={guard.FEEDBACK_ENV: 'off'})
+def test_by_default_the_guard_sends_every_client_all_feedback() -> None:
+    """Without CFT_GUARD_FEEDBACK=on the guard leaves the feedback writer as rmw_fastrtps made it,
+    says once why, and the library's clients say that nothing filters."""
+    run = feedback_run(guarded=True)
     assert_every_client_took_its_feedback(run)
     assert filtered_in(run) == ['none'] * LIBRARY, run.reports
+    said = [line for line in run.server_lines if 'CFT_GUARD_FEEDBACK=on' in line]
+    assert len(said) == 1, run.server_lines
     every = sum(goals for _, goals in CLIENTS) * ORDER
     assert {len(uuids) for uuids in goals_by_port(run).values()} == {every}
     assert run.stats_after['guard_feedback']['writers'] == 0, run.stats_after['guard_feedback']
@@ -113,7 +119,7 @@ def test_a_late_joiner_gets_its_goals_feedback() -> None:
     feedback whole, and neither gets another's in a callback."""
     env = {**os.environ, **UDP_ONLY}
     action = '/' + unique_name('cft_late')
-    server = action_server(action, 0.01, env=guard.environment(env))
+    server = action_server(action, 0.01, env=guard.environment({**env, **ROUTED}))
     clients = []
     try:
         first = helper_process('tests.helpers.fib_client', [action, 'client', 2, LONG], env=env)

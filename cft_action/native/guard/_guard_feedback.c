@@ -4,8 +4,8 @@
 // goals' feedback only when its participant requested the goal (_guard_goals.c), whatever Fast DDS
 // family asks.
 //
-// Fast DDS 3.3+ (Lyrical) asks it through public API: _guard_endpoints.c gives an action's feedback
-// writer, when rcl creates it, the sample prefilter of fastdds3/_prefilter.cpp, which asks this
+// Fast DDS 3.3+ (Lyrical) asks it through public API, with CFT_GUARD_FEEDBACK=on: _guard_endpoints.c
+// gives an action's feedback writer, when rcl creates it, the sample prefilter of fastdds3/_prefilter.cpp, which asks this
 // verdict for each sample and each reader whose discovery data (USER_DATA) carries the mark
 // CFT_READER_MARK (native/_filter_class.h): the library's clients mark their feedback reader so
 // (native/reader/fastdds3/). Every other reader (plain rclpy clients, monitors, `ros2 topic echo`)
@@ -16,7 +16,12 @@
 // - No goal is hidden from its client: a goal whose requester is not recorded (taken before the
 //   record was cleared, or without rmw's layouts) passes, counted (`unknown`); so does a sample
 //   that does not read as plain CDR with a goal UUID (`malformed`).
-// - CFT_GUARD_FEEDBACK=off (or 0) leaves every feedback writer as rmw_fastrtps made it.
+// - Opt-in: only CFT_GUARD_FEEDBACK=on (or 1) routes feedback. Fast DDS 3.6.2 sent a reader about
+//   two GAP or HEARTBEAT datagrams per sample withheld from it (the 2.14 guard merges a reader's
+//   GAP into its next DATA: _guard.c), so a server whose feedback writer keeps rclpy's 10 samples,
+//   N = 16 clients x 4 goals, spent 2.1x plain's CPU per message at 36 B and 1.2x at 4 kB, and
+//   reached 0.47x plain's rate at 36 B (docs/BENCHMARKS.md, "Lyrical's Fast DDS 3.6.2"). Otherwise every feedback writer stays as
+//   rmw_fastrtps made it, and the library's clients behave as plain rclpy's.
 
 #include "_guard_feedback.h"
 
@@ -35,7 +40,7 @@ static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_
 
 bool cft_feedback_wanted(void) {
   const char *text = getenv("CFT_GUARD_FEEDBACK");
-  return !(text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0));
+  return text != NULL && (strcmp(text, "on") == 0 || strcmp(text, "1") == 0);
 }
 
 bool cft_feedback_is_topic(const char *topic) {

@@ -11,7 +11,7 @@
 #define CFT_EXPORT __attribute__((visibility("default")))
 #endif
 
-// Whether CFT_GUARD_FEEDBACK leaves the feedback prefilter on (not "off" or "0").
+// Whether CFT_GUARD_FEEDBACK turns the feedback prefilter on ("on" or "1"; off by default).
 bool cft_feedback_wanted(void);
 
 // Whether `topic` (a fully qualified ROS topic name) is an action's feedback topic.
