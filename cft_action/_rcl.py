@@ -479,12 +479,15 @@ _GET_DATAREADER = '_ZN16rmw_fastrtps_cpp14get_datareaderEP18rmw_subscription_s'
 
 
 # The layer's symbols, bound where it may be loaded (by library: 'layer', or rmw_fastrtps_cpp's):
-# name: (library, restype, argtypes); their return codes are the callers' to read.
-_FASTDDS3_SYMBOLS: dict[str, tuple[str, Any, list[Any]]] = {
-    'cft_fastdds3_mark_reader': ('layer', ctypes.c_int32, [_void_p, ctypes.c_char_p]),
-    'cft_fastdds3_marked_writers':
-        ('layer', ctypes.c_int32, [_void_p, ctypes.c_char_p, ctypes.POINTER(ctypes.c_int32)]),
-    _GET_DATAREADER: ('librmw_fastrtps_cpp.so', _void_p, [_void_p]),
+# attribute of _Fastdds3Layer: (library, symbol, restype, argtypes); their return codes are the
+# callers' to read.
+_FASTDDS3_SYMBOLS: dict[str, tuple[str, str, Any, list[Any]]] = {
+    'mark_reader':
+        ('layer', 'cft_fastdds3_mark_reader', ctypes.c_int32, [_void_p, ctypes.c_char_p]),
+    'marked_writers':
+        ('layer', 'cft_fastdds3_marked_writers', ctypes.c_int32,
+         [_void_p, ctypes.c_char_p, ctypes.POINTER(ctypes.c_int32)]),
+    'datareader': ('librmw_fastrtps_cpp.so', _GET_DATAREADER, _void_p, [_void_p]),
 }
 
 
@@ -506,9 +509,8 @@ class _Fastdds3Layer:
             libraries = {'layer': _load(extension_path(READER_FASTDDS3_LIBRARY) or
                                         READER_FASTDDS3_LIBRARY),
                          'librmw_fastrtps_cpp.so': _load('librmw_fastrtps_cpp.so')}
-            self.mark_reader, self.marked_writers, self.datareader = (
-                _map_symbol(libraries[library], name, restype, argtypes)
-                for name, (library, restype, argtypes) in _FASTDDS3_SYMBOLS.items())
+            for attribute, (library, name, restype, argtypes) in _FASTDDS3_SYMBOLS.items():
+                setattr(self, attribute, _map_symbol(libraries[library], name, restype, argtypes))
         except BindingUnavailable as e:
             self.reason = str(e)
 

@@ -364,9 +364,8 @@ def feedback_counts() -> dict[str, int]:
     (cft_action/native/guard/_guard_feedback.c). Only with ``CFT_GUARD_FEEDBACK=on``: Fast DDS
     3.6.2 sent a reader about two GAP or HEARTBEAT datagrams per sample withheld from it, which
     cost a server of rclpy's feedback depth (10) up to 2.1x plain's CPU per message
-    (docs/COMPATIBILITY.md). On Fast
-    DDS 2.14 feedback is filtered through the content filter classes instead (:func:`filter_counts`)
-    and these stay 0. Keys:
+    (docs/COMPATIBILITY.md). On Fast DDS 2.14 feedback is filtered through the content filter
+    classes instead (:func:`filter_counts`) and these stay 0. Keys:
 
     - ``writers``: feedback writers given the prefilter (and the mark that says so);
     - ``verdicts``: samples judged for marked readers; of those, ``withheld`` went not to the

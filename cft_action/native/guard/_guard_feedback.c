@@ -4,13 +4,14 @@
 // goals' feedback only when its participant requested the goal (_guard_goals.c), whatever Fast DDS
 // family asks.
 //
-// Fast DDS 3.3+ (Lyrical) asks it through public API, with CFT_GUARD_FEEDBACK=on: _guard_endpoints.c
-// gives an action's feedback writer, when rcl creates it, the sample prefilter of fastdds3/_prefilter.cpp, which asks this
-// verdict for each sample and each reader whose discovery data (USER_DATA) carries the mark
-// CFT_READER_MARK (native/_filter_class.h): the library's clients mark their feedback reader so
-// (native/reader/fastdds3/). Every other reader (plain rclpy clients, monitors, `ros2 topic echo`)
-// gets every sample, as from an unguarded server. Fast DDS 2.14 (Jazzy) filters feedback through
-// the content filter classes instead (_guard_filter.c), and does not ask this.
+// Fast DDS 3.3+ (Lyrical) asks it through public API, with CFT_GUARD_FEEDBACK=on:
+// _guard_endpoints.c gives an action's feedback writer, when rcl creates it, the sample prefilter
+// of fastdds3/_prefilter.cpp, which asks this verdict for each sample and each reader whose
+// discovery data (USER_DATA) carries the mark CFT_READER_MARK (native/_filter_class.h): the
+// library's clients mark their feedback reader so (native/reader/fastdds3/). Every other reader
+// (plain rclpy clients, monitors, `ros2 topic echo`) gets every sample, as from an unguarded
+// server. Fast DDS 2.14 (Jazzy) filters feedback through the content filter classes instead
+// (_guard_filter.c), and does not ask this.
 //
 // Soundness rules:
 // - No goal is hidden from its client: a goal whose requester is not recorded (taken before the
@@ -20,8 +21,9 @@
 //   two GAP or HEARTBEAT datagrams per sample withheld from it (the 2.14 guard merges a reader's
 //   GAP into its next DATA: _guard.c), so a server whose feedback writer keeps rclpy's 10 samples,
 //   N = 16 clients x 4 goals, spent 2.1x plain's CPU per message at 36 B and 1.2x at 4 kB, and
-//   reached 0.47x plain's rate at 36 B (docs/BENCHMARKS.md, "Lyrical's Fast DDS 3.6.2"). Otherwise every feedback writer stays as
-//   rmw_fastrtps made it, and the library's clients behave as plain rclpy's.
+//   reached 0.47x plain's rate at 36 B (docs/BENCHMARKS.md, "Lyrical's Fast DDS 3.6.2"). Otherwise
+//   every feedback writer stays as rmw_fastrtps made it, and the library's clients behave as plain
+//   rclpy's.
 
 #include "_guard_feedback.h"
 
