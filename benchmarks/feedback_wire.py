@@ -2,14 +2,13 @@
 feedback prefilter (cft_action/native/guard/_guard_feedback.c) and without it.
 
 There the library's client marks its feedback reader (USER_DATA) and a guarded server's feedback
-writer sends it only its own goals' feedback; plain clients get all of it. This runs, alternating, a
-guarded server with ``CFT_GUARD_FEEDBACK=on`` (the prefilter is opt-in), one with the guard's
-default and, with ``--unguarded``, one without the guard, each with three of the library's clients
-and a plain rclpy one (``--goals`` goals of ``--order`` feedback messages each, the k-th carrying
-k + 1 int32), on UDP only, through :func:`tests.support.clients_on_the_wire`: a raw socket on
-loopback counts the feedback writer's DATA and bytes (DATA, GAPs, HEARTBEATs) by destination
-port, one port per client's participant (all runs' ports together: a port that got only its
-client's goals, or all).
+writer sends it only its own goals' feedback; plain clients get all of it. This runs, alternating,
+a guarded server, one with ``CFT_GUARD_FEEDBACK=off`` and, with ``--unguarded``, one without the
+guard, each with three of the library's clients and a plain rclpy one (``--goals`` goals of
+``--order`` feedback messages each, the k-th carrying k + 1 int32), on UDP only, through
+:func:`tests.support.clients_on_the_wire`: a raw socket on loopback counts the feedback writer's
+DATA and bytes (DATA, GAPs, HEARTBEATs) by destination port, one port per client's participant
+(all runs' ports together: a port that got only its client's goals, or all).
 
 Needs root, and the stack's environment (``compat/stack_env.sh``).
 
@@ -29,8 +28,8 @@ from tests.support import clients_on_the_wire
 
 #: Three of the library's clients (default mode) and one plain.
 MODES = ('client', 'client', 'client', 'rclpy')
-CONFIGS = {'CFT_GUARD_FEEDBACK=on': (True, {'CFT_GUARD_FEEDBACK': 'on'}),
-           'guard default': (True, {}),
+CONFIGS = {'prefilter on': (True, {}),
+           'CFT_GUARD_FEEDBACK=off': (True, {'CFT_GUARD_FEEDBACK': 'off'}),
            'unguarded': (False, {})}
 
 

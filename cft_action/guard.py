@@ -20,9 +20,9 @@ Where it knows the Fast DDS, it also sends each of an action's goal, cancel and 
 to the response readers of the participant that sent the request (the others' take would discard
 it): see :func:`reply_counts`; ``CFT_GUARD_REPLIES=off`` sends every reply to every client, as
 rmw_fastrtps does. On Fast DDS 3.3+ (Lyrical) it does so through the writers' public sample
-prefilter, where the package was built against those headers: see :func:`prefilter`; with
-``CFT_GUARD_FEEDBACK=on`` it also sends each of this library's clients only its own goals' feedback
-there (:func:`feedback_counts`; opt-in, as it can cost the server more CPU than it saves).
+prefilter, where the package was built against those headers: see :func:`prefilter`; there it
+also sends each of this library's clients only its own goals' feedback (:func:`feedback_counts`,
+``CFT_GUARD_FEEDBACK=off``).
 
 It only locks on a Fast DDS it knows (``libfastrtps.so.2.14``, ``libfastdds.so.3.6``,
 ``libfastdds.so.3.2``). On any other version it calls straight through and prints one line on
@@ -205,7 +205,7 @@ def prefilter() -> str:
     """Return the state of the guard's Fast DDS 3 layer, which routes an action's replies and
     feedback with the writers' public sample prefilter (Fast DDS 3.3+, Lyrical): ``'on: <its
     library>, built with <headers>'``, or ``'off: <why>'`` (``CFT_GUARD_REPLIES`` and
-    ``CFT_GUARD_FEEDBACK`` not on, not built against Fast DDS 3.3+ headers, another Fast DDS loaded,
+    ``CFT_GUARD_FEEDBACK`` off, not built against Fast DDS 3.3+ headers, another Fast DDS loaded,
     another rmw, or no action endpoint created yet). Decided at the first action service or
     feedback publisher of a process of Fast DDS 3, and said once on stderr when off. An empty
     string when the guard is not preloaded.
@@ -282,7 +282,9 @@ def heartbeat_counts() -> dict[str, int]:
     or whose change goes to one reader, the personal GAP and HEARTBEAT that Fast DDS sends a
     reader with a run of filtered-out changes before its DATA, in a datagram of their own, go in
     the DATA's datagram, and that DATA's piggyback HEARTBEAT, the same again, is left out
-    (``CFT_GUARD_MERGE_GAPS=0``: as Fast DDS).
+    (``CFT_GUARD_MERGE_GAPS=0``: as Fast DDS). On Fast DDS 3.6 (Lyrical) the first two act, in the
+    writes of feedback writers routed to the library's clients (:func:`feedback_counts`), which
+    3.6 sends such HEARTBEATs and GAPs alike; nothing else changes there.
     Keys:
 
     - ``narrowed``: piggyback HEARTBEATs that went to the DATA's readers only;
@@ -350,8 +352,7 @@ def reply_counts() -> dict[str, int]:
 #: The counters of cft_guard_feedback_count() in _guard_feedback.c, in its order.
 FEEDBACK_COUNTERS = ('writers', 'verdicts', 'withheld', 'unknown', 'malformed')
 
-#: Environment variable that turns the Fast DDS 3 feedback prefilter on (``on`` or ``1``; off by
-#: default).
+#: Environment variable that turns the Fast DDS 3 feedback prefilter off (``off`` or ``0``).
 FEEDBACK_ENV = 'CFT_GUARD_FEEDBACK'
 
 
@@ -361,10 +362,10 @@ def feedback_counts() -> dict[str, int]:
     There, an action's feedback writer gets a sample prefilter (public Fast DDS API) that sends the
     library's clients, which mark their feedback reader's USER_DATA, only the feedback of the goals
     their participant requested; every other reader gets every sample
-    (cft_action/native/guard/_guard_feedback.c). Only with ``CFT_GUARD_FEEDBACK=on``: Fast DDS
-    3.6.2 sent a reader about two GAP or HEARTBEAT datagrams per sample withheld from it, which
-    cost a server of rclpy's feedback depth (10) up to 2.1x plain's CPU per message
-    (docs/COMPATIBILITY.md). On Fast DDS 2.14 feedback is filtered through the content filter
+    (cft_action/native/guard/_guard_feedback.c). ``CFT_GUARD_FEEDBACK=off`` turns that off, and
+    ``RMW_FASTRTPS_PUBLICATION_MODE=ASYNCHRONOUS`` keeps it off (said once on stderr): the GAPs and
+    HEARTBEATs of withheld samples are kept cheap on the writing thread only
+    (:func:`heartbeat_counts`). On Fast DDS 2.14 feedback is filtered through the content filter
     classes instead (:func:`filter_counts`) and these stay 0. Keys:
 
     - ``writers``: feedback writers given the prefilter (and the mark that says so);

@@ -34,3 +34,8 @@ void *cft_guard_loaded_symbol(const char *name, const char *prefer) {
   (void)name, (void)prefer;
   return NULL;
 }
+
+void *cft_guard_real_in_caller(void **cache, const char *name, const void *return_address) {
+  (void)cache, (void)name, (void)return_address;
+  return NULL;
+}

@@ -1,11 +1,11 @@
 # Copyright 2026 The cft_action authors. Licensed under the Apache License, Version 2.0.
-"""Feedback on the wire on Fast DDS 3.3+ (Lyrical's 3.6.2, `make compat-kilted`): under the guard
-with CFT_GUARD_FEEDBACK=on, each of the library's clients, whose feedback reader asks for its own
-goals' feedback only (a USER_DATA mark, cft_action/native/reader/fastdds3/), receives only its
-goals' feedback, through the feedback writer's public sample prefilter
-(cft_action/native/guard/fastdds3/, _guard_feedback.c); plain clients and monitors receive all. By
-default the guard leaves feedback as rmw_fastrtps sends it, and the library's clients behave as
-plain rclpy's.
+"""Feedback on the wire on Fast DDS 3.3+ (Lyrical's 3.6.2, `make compat-kilted`): under the guard,
+each of the library's clients, whose feedback reader asks for its own goals' feedback only (a
+USER_DATA mark, cft_action/native/reader/fastdds3/), receives only its goals' feedback, through the
+feedback writer's public sample prefilter (cft_action/native/guard/fastdds3/, _guard_feedback.c),
+without a datagram per sample withheld (_guard_heartbeats.c); plain clients and monitors receive
+all. With CFT_GUARD_FEEDBACK=off the guard leaves feedback as rmw_fastrtps sends it, and the
+library's clients behave as plain rclpy's.
 
 A server (its own process) serves three of the library's clients, a plain rclpy client and a
 plain rclpy client with no goals (a feedback monitor: its feedback reader gets every sample), each
@@ -23,7 +23,7 @@ import os
 import pytest
 
 from cft_action import guard
-from harness.capture import samples_by_port
+from harness.capture import samples_by_port, writer_datagrams_by_port
 from harness.ros import unique_name
 from tests.support import action_server, clients_on_the_wire, helper_process, UDP_ONLY, WireRun
 from tests.test_fastdds3_replies import MISSING
@@ -35,8 +35,11 @@ LONG = 1000
 #: (mode, goals): three of the library's clients, a plain one, a monitor.
 CLIENTS = (('client', 2), ('client', 3), ('client', 4), ('rclpy', 2), ('rclpy', 0))
 LIBRARY = 3
-#: The server's environment that routes feedback (opt-in).
-ROUTED = {guard.FEEDBACK_ENV: 'on'}
+#: Goals of each client, and feedback messages of each goal, where datagrams are counted.
+GOALS, HEAVY = 4, 50
+#: Lone datagrams a routed reader may get besides those per own sample: the periodic heartbeat
+#: (3 s) and the answers to its acknowledgements.
+SLACK = 20
 pytestmark = [
     pytest.mark.skipif(MISSING is not None, reason=MISSING or ''),
     pytest.mark.skipif(os.geteuid() != 0, reason='a raw socket needs root'),
@@ -73,7 +76,7 @@ def test_each_library_client_receives_only_its_own_feedback() -> None:
     client's and the monitor's every sample; the guard's layer is on, its feedback writer
     routed, and it withheld the others' samples from each library client; the clients say that
     the writer filters."""
-    run = feedback_run(guarded=True, server_env=ROUTED)
+    run = feedback_run(guarded=True)
     assert_every_client_took_its_feedback(run)
     assert filtered_in(run) == ['writer'] * LIBRARY, run.reports
     assert run.stats_after['guard_prefilter'].startswith('on: '), run.stats_after
@@ -101,13 +104,17 @@ def test_an_unguarded_server_sends_every_client_all_feedback() -> None:
     assert {len(uuids) for uuids in goals_by_port(run).values()} == {every}
 
 
-def test_by_default_the_guard_sends_every_client_all_feedback() -> None:
-    """Without CFT_GUARD_FEEDBACK=on the guard leaves the feedback writer as rmw_fastrtps made it,
-    says once why, and the library's clients say that nothing filters."""
-    run = feedback_run(guarded=True)
+@pytest.mark.parametrize('server_env', [{guard.FEEDBACK_ENV: 'off'},
+                                        {'RMW_FASTRTPS_PUBLICATION_MODE': 'ASYNCHRONOUS'}],
+                         ids=['off', 'asynchronous'])
+def test_unrouted_the_guard_sends_every_client_all_feedback(server_env: dict[str, str]) -> None:
+    """With CFT_GUARD_FEEDBACK=off, or an asynchronous publication mode (which the guard's GAP and
+    HEARTBEAT handling does not reach), the guard leaves the feedback writer as rmw_fastrtps made
+    it, says once why, and the library's clients say that nothing filters."""
+    run = feedback_run(guarded=True, server_env=server_env)
     assert_every_client_took_its_feedback(run)
     assert filtered_in(run) == ['none'] * LIBRARY, run.reports
-    said = [line for line in run.server_lines if 'CFT_GUARD_FEEDBACK=on' in line]
+    said = [line for line in run.server_lines if 'feedback goes to every client' in line]
     assert len(said) == 1, run.server_lines
     every = sum(goals for _, goals in CLIENTS) * ORDER
     assert {len(uuids) for uuids in goals_by_port(run).values()} == {every}
@@ -119,7 +126,7 @@ def test_a_late_joiner_gets_its_goals_feedback() -> None:
     feedback whole, and neither gets another's in a callback."""
     env = {**os.environ, **UDP_ONLY}
     action = '/' + unique_name('cft_late')
-    server = action_server(action, 0.01, env=guard.environment({**env, **ROUTED}))
+    server = action_server(action, 0.01, env=guard.environment(env))
     clients = []
     try:
         first = helper_process('tests.helpers.fib_client', [action, 'client', 2, LONG], env=env)
@@ -141,3 +148,27 @@ def test_a_late_joiner_gets_its_goals_feedback() -> None:
     for report in reports:
         assert report['complete_goals'] == 2 and report['misrouted'] == 0, report
     assert counts['withheld'] > 0, counts
+
+
+def test_withheld_samples_cost_a_routed_reader_no_datagram_each() -> None:
+    """At rclpy's feedback depth (10: the history is nearly always full), Fast DDS 3.6 sends a
+    reader a GAP per run of samples withheld from it, and a HEARTBEAT to all readers, each in a
+    datagram of its own, at every write. The guard keeps the HEARTBEAT with the DATA, to its
+    readers, and leaves the run's GAP for the reader's next DATA (its personal GAP and HEARTBEAT)
+    or the periodic heartbeat (_guard_heartbeats.c): beside a plain reader, each routed reader gets
+    about one GAP/HEARTBEAT datagram per own sample, not one per other's (Fast DDS: 815 here)."""
+    clients = [('client', GOALS, HEAVY), ('client', GOALS, HEAVY), ('rclpy', GOALS, HEAVY)]
+    run = clients_on_the_wire(clients, writer_datagrams_by_port, feedback_depth=10, together=True)
+    for report in run.reports:
+        assert report['complete_goals'] == GOALS and report['misrouted'] == 0, report
+    before, after = run.stats_at_go['guard_heartbeats'], run.stats_after['guard_heartbeats']
+    counts = {k: after[k] - before[k] for k in after}
+    assert counts['narrowed'] > 0 and counts['gaps_deferred'] > 0, counts
+    writes = GOALS * HEAVY * len(clients)
+    *routed, (_, plain) = sorted(run.captured.items(), key=lambda item: item[1]['data'])
+    assert len(routed) == 2 and plain['data'] >= writes, run.captured
+    for _, datagrams in routed:
+        assert datagrams['data'] <= GOALS * HEAVY + SLACK, run.captured
+        lone = datagrams['heartbeat'] + datagrams['gap'] + datagrams['gap+heartbeat']
+        # at most its personal GAP and HEARTBEAT before each own sample, the periodic heartbeat's
+        assert lone <= GOALS * HEAVY + SLACK, (run.captured, counts)

@@ -235,10 +235,10 @@ class FeedbackFilter:
         self._logged_unguarded = True  # asked and answered: once is enough
         if where == 'none' and self._own_feedback is not None:
             self._logger.info(
-                "the action server's writer does not filter this client's feedback (on Fast DDS 3 "
-                "it does under 'cft-action guard' with CFT_GUARD_FEEDBACK=on): other goals' "
-                'feedback reaches this client, which drops it in Python as plain rclpy does '
-                '(docs/COMPATIBILITY.md, "Fast DDS 3")')
+                "the action server's writer does not filter this client's feedback (on Fast DDS "
+                "3.3+ it does under 'cft-action guard', unless CFT_GUARD_FEEDBACK=off there): "
+                "other goals' feedback reaches this client, which drops it in Python as plain "
+                'rclpy does (docs/COMPATIBILITY.md, "Fast DDS 3")')
         if where != 'reader':
             return
         self._logger.info(

@@ -112,16 +112,17 @@ static void restore_filtering_writer(const void **saved) { cft_filtering_writer 
       cft_filtering_writer;                                                                     \
   cft_filtering_writer = (writer)
 
-// Opens _guard_status.c's frame of the write for the enclosing block (`open`: the family has it),
-// and closes it however the block is left.
+// Opens _guard_status.c's frame of the write for the enclosing block, and closes it however the
+// block is left. Every family has it: on Fast DDS 3 the verdicts of routed readers mark it
+// (_guard_feedback.c), for _guard_heartbeats.c.
 static void close_status_frame(struct cft_status_frame **frame) {
   if (*frame != NULL) cft_status_frame_close(*frame);
 }
-#define STATUS_FRAME_IN_SCOPE(open)                                                              \
+#define STATUS_FRAME_IN_SCOPE()                                                                  \
   struct cft_status_frame status_frame_;                                                         \
   struct cft_status_frame *status_frame_open_ __attribute__((cleanup(close_status_frame))) =    \
-      (open) ? &status_frame_ : NULL;                                                            \
-  if (status_frame_open_ != NULL) cft_status_frame_open(status_frame_open_)
+      &status_frame_;                                                                            \
+  cft_status_frame_open(status_frame_open_)
 
 // The writer whose process_reader_filter_info runs on this thread, when the guard keeps the
 // writer's filters of the library's classes (Fast DDS 2.14): a filter created now is that
@@ -177,7 +178,7 @@ static struct family *ready(int fam) {
     if (f->state != CFT_GUARD_ACTIVE) return real(self, kind, data, params, handle);            \
     LOCK_WRITER_IN_SCOPE(self);                                                                 \
     FILTERING_WRITER_IN_SCOPE(FILTERS && scoped_lock_ != NULL ? self : NULL);                   \
-    STATUS_FRAME_IN_SCOPE(FILTERS);                                                             \
+    STATUS_FRAME_IN_SCOPE();                                                                    \
     return real(self, kind, data, params, handle);                                              \
   }                                                                                             \
   void cft_prfi##SUFFIX(void *self, const void *guid, const void *info) {                       \

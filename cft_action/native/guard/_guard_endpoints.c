@@ -259,13 +259,12 @@ static void publisher_created(const void *publisher) {
   if (__atomic_load_n(&routed_count, __ATOMIC_ACQUIRE) > 0) set_routing(publisher, NULL);
   if (rcl.topic == NULL || rcl.publisher_rmw_handle == NULL) return;
   const char *topic = rcl.topic(publisher);
-  if (!cft_feedback_wanted()) {
+  const char *unroutable = cft_feedback_unroutable();
+  if (unroutable != NULL) {
     static int said;
     if (CFT_FASTDDS3_PREFILTER && cft_feedback_is_topic(topic) && cft_loaded_family() == 1 &&
         !__atomic_exchange_n(&said, 1, __ATOMIC_ACQ_REL))
-      cft_say("feedback goes to every client as rmw_fastrtps sends it; CFT_GUARD_FEEDBACK=on "
-              "routes it (on Fast DDS 3.6 the GAPs and HEARTBEATs of withheld samples can cost "
-              "the server more CPU than they save: docs/COMPATIBILITY.md)");
+      cft_say("feedback goes to every client as rmw_fastrtps sends it: %s", unroutable);
     return;
   }
   if (!layer_for(cft_feedback_is_topic(topic))) return;
@@ -309,6 +308,6 @@ int32_t rcl_publish(const void *publisher, const void *ros_message, void *alloca
 // The Fast DDS 3 layer's state: "on: ..." or "off: <why>".
 CFT_EXPORT const char *cft_guard_prefilter_state(void) {
   if (!cft_replies_wanted() && !cft_feedback_wanted())
-    return "off: CFT_GUARD_REPLIES is off and CFT_GUARD_FEEDBACK is not on";
+    return "off: CFT_GUARD_REPLIES and CFT_GUARD_FEEDBACK are off";
   return __atomic_load_n(&layer_state, __ATOMIC_ACQUIRE);
 }

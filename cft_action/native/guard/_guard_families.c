@@ -217,6 +217,19 @@ void *cft_guard_real(void **cache, const char *soname, const char *name) {
   return p;
 }
 
+void *cft_guard_real_in_caller(void **cache, const char *name, const void *return_address) {
+  void *p = __atomic_load_n(cache, __ATOMIC_ACQUIRE);
+  if (p != NULL) return p;
+  Dl_info info;
+  if (dladdr(return_address, &info) != 0 && info.dli_fname != NULL) {
+    void *handle = dlopen(info.dli_fname, RTLD_LAZY | RTLD_NOLOAD);
+    p = handle != NULL ? dlsym(handle, name) : NULL;
+  }
+  if (p == NULL) p = dlsym(RTLD_NEXT, name);
+  __atomic_store_n(cache, p, __ATOMIC_RELEASE);
+  return p;
+}
+
 // Every loaded object's path, collected by dl_iterate_phdr (which holds the loader's lock, so that
 // dlopen comes after it).
 #define MAX_OBJECTS 512

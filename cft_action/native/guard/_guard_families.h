@@ -115,6 +115,12 @@ long cft_guard_env_ms(long *cache, const char *env, long fallback_ms, long min_m
 // the pointer must not outlive it.
 void *cft_guard_real(void **cache, const char *soname, const char *name);
 
+// The definition of `name` in the library that called the interposed member `name` (the call's
+// `return_address` is in it): for Fast DDS's own members, which only Fast DDS calls, whichever
+// version and soname is loaded. Else the next one after the guard's; NULL if none. Cached as
+// cft_guard_real's.
+void *cft_guard_real_in_caller(void **cache, const char *name, const void *return_address);
+
 // The definition of `name` in a loaded object other than the guard, one whose path holds `prefer`
 // if there is one (NULL: the first found); NULL if none. For the libraries that ROS loads in a local
 // scope, outside the global one that RTLD_NEXT searches (rcl, rmw_implementation, which the wheels

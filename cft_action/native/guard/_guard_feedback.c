@@ -4,26 +4,27 @@
 // goals' feedback only when its participant requested the goal (_guard_goals.c), whatever Fast DDS
 // family asks.
 //
-// Fast DDS 3.3+ (Lyrical) asks it through public API, with CFT_GUARD_FEEDBACK=on:
-// _guard_endpoints.c gives an action's feedback writer, when rcl creates it, the sample prefilter
-// of fastdds3/_prefilter.cpp, which asks this verdict for each sample and each reader whose
-// discovery data (USER_DATA) carries the mark CFT_READER_MARK (native/_filter_class.h): the
-// library's clients mark their feedback reader so (native/reader/fastdds3/). Every other reader
-// (plain rclpy clients, monitors, `ros2 topic echo`) gets every sample, as from an unguarded
-// server. Fast DDS 2.14 (Jazzy) filters feedback through the content filter classes instead
-// (_guard_filter.c), and does not ask this.
+// Fast DDS 3.3+ (Lyrical) asks it through public API: _guard_endpoints.c gives an action's feedback
+// writer, when rcl creates it, the sample prefilter of fastdds3/_prefilter.cpp, which asks this
+// verdict for each sample and each reader whose discovery data (USER_DATA) carries the mark
+// CFT_READER_MARK (native/_filter_class.h): the library's clients mark their feedback reader so
+// (native/reader/fastdds3/). Every other reader (plain rclpy clients, monitors, `ros2 topic echo`)
+// gets every sample, as from an unguarded server. Fast DDS 2.14 (Jazzy) filters feedback through
+// the content filter classes instead (_guard_filter.c), and does not ask this.
 //
 // Soundness rules:
 // - No goal is hidden from its client: a goal whose requester is not recorded (taken before the
 //   record was cleared, or without rmw's layouts) passes, counted (`unknown`); so does a sample
 //   that does not read as plain CDR with a goal UUID (`malformed`).
-// - Opt-in: only CFT_GUARD_FEEDBACK=on (or 1) routes feedback. Fast DDS 3.6.2 sent a reader about
-//   two GAP or HEARTBEAT datagrams per sample withheld from it (the 2.14 guard merges a reader's
-//   GAP into its next DATA: _guard.c), so a server whose feedback writer keeps rclpy's 10 samples,
-//   N = 16 clients x 4 goals, spent 2.1x plain's CPU per message at 36 B and 1.2x at 4 kB, and
-//   reached 0.47x plain's rate at 36 B (docs/BENCHMARKS.md, "Lyrical's Fast DDS 3.6.2"). Otherwise
-//   every feedback writer stays as rmw_fastrtps made it, and the library's clients behave as plain
-//   rclpy's.
+// - Each verdict marks the write's frame (_guard_status.h): in such writes _guard_heartbeats.c
+//   keeps Fast DDS 3.6's HEARTBEAT with the DATA and leaves a reader's GAP for its next DATA, which
+//   Fast DDS would otherwise send, each in a datagram of its own, to every reader a sample is
+//   withheld from: without that, a server whose feedback writer keeps rclpy's 10 samples spent
+//   2.1x plain's CPU per message (N = 16 clients x 4 goals, 36 B); with it 0.42x
+//   (docs/BENCHMARKS.md, "Lyrical's Fast DDS 3.6.2"). Those members act on the writing thread
+//   only, so an asynchronous publication mode (RMW_FASTRTPS_PUBLICATION_MODE=ASYNCHRONOUS) is not
+//   routed, said once (cft_feedback_unroutable).
+// - CFT_GUARD_FEEDBACK=off (or 0) leaves every feedback writer as rmw_fastrtps made it.
 
 #include "_guard_feedback.h"
 
@@ -31,6 +32,7 @@
 #include <string.h>
 
 #include "_guard_goals.h"
+#include "_guard_status.h"
 #include "_guard_text.h"
 
 #define FEEDBACK_SUFFIX "/_action/feedback"
@@ -42,7 +44,17 @@ static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_
 
 bool cft_feedback_wanted(void) {
   const char *text = getenv("CFT_GUARD_FEEDBACK");
-  return text != NULL && (strcmp(text, "on") == 0 || strcmp(text, "1") == 0);
+  return !(text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0));
+}
+
+const char *cft_feedback_unroutable(void) {
+  if (!cft_feedback_wanted()) return "CFT_GUARD_FEEDBACK is off";
+  const char *mode = getenv("RMW_FASTRTPS_PUBLICATION_MODE");
+  if (mode != NULL && strcmp(mode, "ASYNCHRONOUS") == 0)
+    return "RMW_FASTRTPS_PUBLICATION_MODE=ASYNCHRONOUS sends from another thread, where the guard "
+           "cannot keep each withheld sample's GAP and HEARTBEAT from costing the server more "
+           "than it saves";
+  return NULL;
 }
 
 bool cft_feedback_is_topic(const char *topic) {
@@ -50,8 +62,8 @@ bool cft_feedback_is_topic(const char *topic) {
          cft_ends_with(topic, FEEDBACK_SUFFIX);
 }
 
-int cft_feedback_verdict(const uint8_t *data, uint32_t length, const uint8_t *reader_guid) {
-  count(VERDICTS);
+// 1 when the sample goes to the reader, 0 when not: see the soundness rules.
+static int verdict_of(const uint8_t *data, uint32_t length, const uint8_t *reader_guid) {
   // Plain CDR, big (0x0000) or little endian (0x0001): a uint8[16] needs no alignment.
   if (data == NULL || length < ENCAPSULATION_SIZE + CFT_UUID_SIZE || data[0] != 0 || data[1] > 1) {
     count(MALFORMED);
@@ -67,6 +79,14 @@ int cft_feedback_verdict(const uint8_t *data, uint32_t length, const uint8_t *re
     default:
       return 1;
   }
+}
+
+int cft_feedback_verdict(const uint8_t *data, uint32_t length, const uint8_t *reader_guid) {
+  count(VERDICTS);
+  // The write's frame (_guard_status.h) learns that it asked a routed reader: _guard_heartbeats.c
+  // acts on such writes only, on Fast DDS 3.
+  cft_write_judged(CFT_KEPT_READER);
+  return cft_write_passes(verdict_of(data, length, reader_guid) != 0);
 }
 
 void cft_feedback_writer_routed(void) {

@@ -11,8 +11,12 @@
 #define CFT_EXPORT __attribute__((visibility("default")))
 #endif
 
-// Whether CFT_GUARD_FEEDBACK turns the feedback prefilter on ("on" or "1"; off by default).
+// Whether CFT_GUARD_FEEDBACK leaves the feedback prefilter on (not "off" or "0").
 bool cft_feedback_wanted(void);
+
+// Why this process's feedback writers are not to be routed (CFT_GUARD_FEEDBACK off, or an
+// asynchronous publication mode), or NULL.
+const char *cft_feedback_unroutable(void);
 
 // Whether `topic` (a fully qualified ROS topic name) is an action's feedback topic.
 bool cft_feedback_is_topic(const char *topic);

@@ -264,21 +264,6 @@ static bool owed(void) {
   return false;
 }
 
-// The definition of `name` in the library that called the interposed member (its return address
-// is there): these members are Fast DDS's own, called only from within its library.
-static void *real_in_caller(void **cache, const char *name, const void *return_address) {
-  void *p = __atomic_load_n(cache, __ATOMIC_ACQUIRE);
-  if (p != NULL) return p;
-  Dl_info info;
-  if (dladdr(return_address, &info) != 0 && info.dli_fname != NULL) {
-    void *handle = dlopen(info.dli_fname, RTLD_LAZY | RTLD_NOLOAD);
-    p = handle != NULL ? dlsym(handle, name) : NULL;
-  }
-  if (p == NULL) p = dlsym(RTLD_NEXT, name);
-  __atomic_store_n(cache, p, __ATOMIC_RELEASE);
-  return p;
-}
-
 typedef void (*removed_fn)(void *self, const void *sequence);
 typedef bool (*acked_fn)(const void *self, const void *sequence);
 typedef bool (*relevant_fn)(const void *self, void *change);
@@ -288,9 +273,9 @@ CFT_EXPORT void cft_change_has_been_removed(void *self, const void *sequence)
     __asm__(CHANGE_REMOVED);
 void cft_change_has_been_removed(void *self, const void *sequence) {
   const void *caller = __builtin_return_address(0);
-  removed_fn real = (removed_fn)real_in_caller(&real_removed, CHANGE_REMOVED, caller);
+  removed_fn real = (removed_fn)cft_guard_real_in_caller(&real_removed, CHANGE_REMOVED, caller);
   if (frame != NULL && __atomic_load_n(&status_readers, __ATOMIC_RELAXED)) {
-    acked_fn acked = (acked_fn)real_in_caller(&real_acked, CHANGE_IS_ACKED, caller);
+    acked_fn acked = (acked_fn)cft_guard_real_in_caller(&real_acked, CHANGE_IS_ACKED, caller);
     if (acked != NULL && !acked(self, sequence)) {
       if (frame->count < CFT_STATUS_FRAME_READERS) frame->readers[frame->count++] = self;
       else frame->overflow = true;
@@ -311,7 +296,7 @@ static void restore_asking(const struct asking_state *saved) {
 
 CFT_EXPORT bool cft_rtps_is_relevant(const void *self, void *change) __asm__(RTPS_IS_RELEVANT);
 bool cft_rtps_is_relevant(const void *self, void *change) {
-  relevant_fn real = (relevant_fn)real_in_caller(&real_relevant, RTPS_IS_RELEVANT,
+  relevant_fn real = (relevant_fn)cft_guard_real_in_caller(&real_relevant, RTPS_IS_RELEVANT,
                                                  __builtin_return_address(0));
   if (real == NULL) return true;  // deliver, as to a reader without a filter
   const struct asking_state saved __attribute__((cleanup(restore_asking))) = {asking, asked_change};
@@ -360,7 +345,7 @@ static void *real_from_unsent;
 static bool change_is_unsent(void **cache, const char *name, const void *caller, void *self,
                              const void *sequence, uint32_t *next_fragment, void *gap,
                              const void *min_sequence, bool *reactivate) {
-  unsent_fn real = (unsent_fn)real_in_caller(cache, name, caller);
+  unsent_fn real = (unsent_fn)cft_guard_real_in_caller(cache, name, caller);
   if (real == NULL) {
     cft_say("no real %s: the guard cannot forward it", name);
     return false;
@@ -370,7 +355,7 @@ static bool change_is_unsent(void **cache, const char *name, const void *caller,
   *reactivate |= reliable_first;
 #if DEFER_LAYOUT_KNOWN
   if (unsent && reliable_first && deferred(self, sequence)) {
-    from_unsent_fn to = (from_unsent_fn)real_in_caller(&real_from_unsent, FROM_UNSENT, caller);
+    from_unsent_fn to = (from_unsent_fn)cft_guard_real_in_caller(&real_from_unsent, FROM_UNSENT, caller);
     if (to != NULL) {
       to(self, sequence, CFR_UNACKNOWLEDGED, false, false);
       count(DEFERRED);
