@@ -266,6 +266,7 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'cft_status_table_number': (_reader_lock, ctypes.c_ulong, [_void_p], None),
     'cft_fastdds3_layer_refused': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_fastdds3_reader_mark': (_reader_lock, ctypes.c_char_p, [], None),
+    'cft_fastdds3_status_reader_mark': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_fastdds3_writer_mark': (_reader_lock, ctypes.c_char_p, [], None),
     # The Python C API, to reach the C functions that rosidl generates for every message type.
     'PyCapsule_GetName': (ctypes.pythonapi, ctypes.c_char_p, [ctypes.py_object], None),
@@ -532,25 +533,26 @@ def _datareader(subscription_ptr: int) -> Optional[int]:
     return _fastdds3_layer().datareader(rmw_subscription) if rmw_subscription else None
 
 
-def mark_own_feedback_reader(subscription_ptr: int) -> str:
-    """Ask a guarded Fast DDS 3.3+ server for this feedback reader's own goals' feedback only: the
-    reader's USER_DATA gets the reader mark (native/_filter_class.h, CFT_READER_MARK;
-    DataReader::set_qos). Return why not, or
-    ``''``."""
+def mark_own_goals_reader(subscription_ptr: int, status: bool = False) -> str:
+    """Ask a guarded Fast DDS 3.3+ server for this feedback reader's own goals' feedback only, or
+    (``status``) this status reader's own goals' status changes only: the reader's USER_DATA gets
+    the reader mark (native/_filter_class.h, CFT_READER_MARK or CFT_STATUS_READER_MARK;
+    DataReader::set_qos). Return why not, or ``''``."""
     layer = _fastdds3_layer()
     if layer.reason:
         return f"the client's Fast DDS 3 layer is off: {layer.reason}"
     reader = _datareader(subscription_ptr)
     if not reader:
         return 'the subscription has no rmw_fastrtps_cpp DataReader'
-    ret = layer.mark_reader(reader, _lib.cft_fastdds3_reader_mark())
+    mark = _lib.cft_fastdds3_status_reader_mark() if status else _lib.cft_fastdds3_reader_mark()
+    ret = layer.mark_reader(reader, mark)
     return f'DataReader::set_qos returned {ret}' if ret != 0 else ''
 
 
 def marked_writers(subscription_ptr: int) -> tuple[int, int]:
     """``(marked, matched)``: of the writers the subscription's reader matches, how many say that
     they filter (a guarded Fast DDS 3.3+ server's: CFT_WRITER_MARK); ``(0, -1)`` when Fast DDS
-    did not answer. The reader was marked by :func:`mark_own_feedback_reader`."""
+    did not answer. The reader was marked by :func:`mark_own_goals_reader`."""
     reader = _datareader(subscription_ptr)
     marked = ctypes.c_int32()
     matched = _fastdds3_layer().marked_writers(

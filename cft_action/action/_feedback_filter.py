@@ -89,7 +89,7 @@ class FeedbackFilter:
         self._logged_explicit_uuid = False
         self._logged_unguarded = False
         # On Fast DDS 3.3+: the rclpy handle and rcl_subscription_t * of the feedback reader that
-        # asks a guarded server for its own goals' feedback only (_rcl.mark_own_feedback_reader).
+        # asks a guarded server for its own goals' feedback only (_rcl.mark_own_goals_reader).
         self._own_feedback: Optional[tuple[ContextManager[Any], int]] = None
 
     def install(self, handle: ContextManager[Any], pointer: Optional[int], topic: str,
@@ -119,7 +119,7 @@ class FeedbackFilter:
         """Where the library's filter class cannot be used (Fast DDS 3): on Fast DDS 3.3+, mark the
         reader so that a guarded server sends it only its own goals' feedback; else plain rclpy."""
         with handle:
-            refused = _rcl.mark_own_feedback_reader(pointer)
+            refused = _rcl.mark_own_goals_reader(pointer)
         unfiltered = f'the {self.reader.filter_class} filter class cannot be used here ({why})'
         if refused:
             self.reader.fall_back(f'{unfiltered}, and {refused}')

@@ -107,9 +107,18 @@ class OwnGoalStatus:
         not know the class and sends every sample, which this process's reader judges; a guarded
         one sends only those that change this client's goals, or that it owes it (section 20).
         The reader acknowledges at once, which shortens what such a server owes it
-        (cft_action/native/reader/_status_acks.c).
+        (cft_action/native/reader/_status_acks.c). Where the class cannot be used (Fast DDS 3),
+        the reader's USER_DATA asks a guarded Fast DDS 3.3+ server for the same samples instead.
         """
         if self._table is None or self.subscription is None:
+            return
+        if why := _rcl.filter_class_status():
+            refused = _rcl.mark_own_goals_reader(self.subscription, status=True)
+            self._logger.info(
+                f'the status filter class cannot be used here ({why}): this client drops the '
+                'entries of other goals' + (f', and {refused}' if refused else
+                                            '; a guarded server (Fast DDS 3.3+) sends it only the '
+                                            'samples that change its goals'))
             return
         acks = _rcl.status_acks_begin()
         try:

@@ -44,6 +44,9 @@
 // (native/reader/fastdds3/): it asks a guarded server for its own goals' feedback only, which the
 // guard's prefilter then sends it (native/guard/_guard_feedback.c); other readers get every sample.
 #define CFT_READER_MARK "cft_action=own_feedback;"
+// The same for its status reader: a guarded server sends it only the status samples that change its
+// goals, or that it is owed (native/guard/_guard_status.c).
+#define CFT_STATUS_READER_MARK "cft_action=own_status;"
 
 // A class's grammar: how an expression compiles to a program (one malloc'd block, or NULL outside
 // the grammar), and a program's verdict on a serialized sample (a SerializedPayload_t *). A class

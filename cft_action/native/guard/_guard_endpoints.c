@@ -36,6 +36,7 @@
 #include "_guard_feedback.h"
 #include "_guard_log.h"
 #include "_guard_replies.h"
+#include "_guard_status.h"
 #include "fastdds3/_prefilter.h"
 
 // setup.py's _fastdds_layout.h says whether the layer was built; a layout header written otherwise
@@ -101,8 +102,8 @@ static char layer_text[640];
 static const char *layer_state = "off: no action endpoint created yet";
 static struct {
   cft_fastdds3_route_replies_fn route_replies;
-  cft_fastdds3_route_feedback_fn route_feedback;
-  cft_fastdds3_feedback_readers_fn feedback_readers;
+  cft_fastdds3_route_marked_fn route_marked;
+  cft_fastdds3_marked_readers_fn marked_readers;
   handle_fn response_writer;
   handle_fn datawriter;
 } layer;
@@ -147,15 +148,14 @@ static void load_layer(void) {
     if (handle != NULL) {
       layer.route_replies =
           (cft_fastdds3_route_replies_fn)dlsym(handle, CFT_FASTDDS3_ROUTE_REPLIES);
-      layer.route_feedback =
-          (cft_fastdds3_route_feedback_fn)dlsym(handle, CFT_FASTDDS3_ROUTE_FEEDBACK);
-      layer.feedback_readers =
-          (cft_fastdds3_feedback_readers_fn)dlsym(handle, CFT_FASTDDS3_FEEDBACK_READERS);
+      layer.route_marked = (cft_fastdds3_route_marked_fn)dlsym(handle, CFT_FASTDDS3_ROUTE_MARKED);
+      layer.marked_readers =
+          (cft_fastdds3_marked_readers_fn)dlsym(handle, CFT_FASTDDS3_MARKED_READERS);
     }
-    if (layer.route_replies == NULL || layer.route_feedback == NULL ||
-        layer.feedback_readers == NULL) {
+    if (layer.route_replies == NULL || layer.route_marked == NULL ||
+        layer.marked_readers == NULL) {
       snprintf(why, sizeof why, "cannot load %.250s: %.150s", path, dlerror());
-      layer.route_replies = NULL, layer.route_feedback = NULL;
+      layer.route_replies = NULL, layer.route_marked = NULL;
     }
   }
   if (why[0] != '\0') {
@@ -212,8 +212,8 @@ int32_t rcl_service_init(void *service, const void *node, const void *type_suppo
 }
 
 // ---- feedback publishers ----------------------------------------------------------------------------
-// The routed feedback publishers (rcl_publisher_t *, never read) with the layer's handle: a few per
-// process (one per action server); past ROUTED_MAX, a feedback writer stays as rmw made it, said.
+// The routed publishers (rcl_publisher_t *, never read) with the layer's handle: a few per process
+// (two per action server); past ROUTED_MAX, a writer stays as rmw made it, said.
 #define ROUTED_MAX 64
 static struct {
   const void *publisher;
@@ -253,33 +253,63 @@ static bool set_routing(const void *publisher, void *routing) {
   return stored;
 }
 
-// A publisher that rcl made: an action's feedback publisher, in a process of Fast DDS 3, gets its
-// samples routed.
+// What the guard routes, by topic: the verdict and the mark of the readers that ask for it.
+static int feedback_judge(void **state, const uint8_t *data, uint32_t length,
+                          const uint8_t *reader) {
+  (void)state;
+  return cft_feedback_verdict(data, length, reader);
+}
+static const struct cft_marked_verdict feedback_verdict = {feedback_judge, NULL};
+static const struct cft_marked_verdict status_verdict = {cft_status_judge, cft_status_forget};
+static const struct routed_kind {
+  const char *what;
+  const struct cft_marked_verdict *verdict;
+  const char *reader_mark;
+  bool (*is_topic)(const char *topic);
+  const char *(*unroutable)(void);  // why not, or NULL
+  void (*routed)(void);             // counts it
+} kinds[] = {
+  {"feedback", &feedback_verdict, CFT_READER_MARK, cft_feedback_is_topic, cft_feedback_unroutable,
+   cft_feedback_writer_routed},
+  {"status", &status_verdict, CFT_STATUS_READER_MARK, cft_status_is_topic, cft_status_unroutable,
+   cft_status_reader_kept},
+};
+#define KINDS ((int)(sizeof kinds / sizeof kinds[0]))
+
+// `publisher`, of `topic`, one of `kind`'s, gets its samples routed, or says once why not.
+static void route(const void *publisher, const char *topic, int kind) {
+  const struct routed_kind *k = &kinds[kind];
+  const char *unroutable = k->unroutable();
+  if (unroutable != NULL) {
+    static int said[KINDS];
+    if (CFT_FASTDDS3_PREFILTER && cft_loaded_family() == 1 &&
+        !__atomic_exchange_n(&said[kind], 1, __ATOMIC_ACQ_REL))
+      cft_say("%s goes to every client as rmw_fastrtps sends it: %s", k->what, unroutable);
+    return;
+  }
+  if (!layer_for(true)) return;
+  void *writer = layer.datawriter(rcl.publisher_rmw_handle(publisher));
+  int32_t error = -1;
+  void *routing = writer != NULL ? layer.route_marked(writer, k->verdict, k->reader_mark,
+                                                      CFT_WRITER_MARK, &error)
+                                 : NULL;
+  if (routing != NULL && set_routing(publisher, routing))
+    k->routed();
+  else
+    cft_say("the %s of %.200s goes to every client: %s (%d)", k->what, topic,
+            writer == NULL ? "it has no rmw_fastrtps_cpp writer"
+            : routing == NULL ? "its DataWriter refused the prefilter or the mark"
+                              : "too many routed publishers", (int)error);
+}
+
+// A publisher that rcl made: an action's feedback or status publisher, in a process of Fast DDS
+// 3, gets its samples routed.
 static void publisher_created(const void *publisher) {
   if (__atomic_load_n(&routed_count, __ATOMIC_ACQUIRE) > 0) set_routing(publisher, NULL);
   if (rcl.topic == NULL || rcl.publisher_rmw_handle == NULL) return;
   const char *topic = rcl.topic(publisher);
-  const char *unroutable = cft_feedback_unroutable();
-  if (unroutable != NULL) {
-    static int said;
-    if (CFT_FASTDDS3_PREFILTER && cft_feedback_is_topic(topic) && cft_loaded_family() == 1 &&
-        !__atomic_exchange_n(&said, 1, __ATOMIC_ACQ_REL))
-      cft_say("feedback goes to every client as rmw_fastrtps sends it: %s", unroutable);
-    return;
-  }
-  if (!layer_for(cft_feedback_is_topic(topic))) return;
-  void *writer = layer.datawriter(rcl.publisher_rmw_handle(publisher));
-  int32_t error = -1;
-  void *routing = writer != NULL ? layer.route_feedback(writer, cft_feedback_verdict,
-                                                        CFT_READER_MARK, CFT_WRITER_MARK, &error)
-                                 : NULL;
-  if (routing != NULL && set_routing(publisher, routing))
-    cft_feedback_writer_routed();
-  else
-    cft_say("the feedback of %.200s goes to every client: %s (%d)", topic,
-            writer == NULL ? "it has no rmw_fastrtps_cpp writer"
-            : routing == NULL ? "its DataWriter refused the prefilter or the mark"
-                              : "too many feedback publishers", (int)error);
+  for (int kind = 0; kind < KINDS; kind++)
+    if (kinds[kind].is_topic(topic) && cft_loaded_family() == 1) route(publisher, topic, kind);
 }
 
 CFT_EXPORT int32_t rcl_publisher_init(void *publisher, const void *node, const void *type_support,
@@ -289,7 +319,7 @@ int32_t rcl_publisher_init(void *publisher, const void *node, const void *type_s
   return init_endpoint(false, publisher, node, type_support, topic_name, options);
 }
 
-// Before a write of a routed feedback publisher, on the publishing thread, outside Fast DDS: the
+// Before a write of a routed publisher, on the publishing thread, outside Fast DDS: the
 // layer learns which of its writer's readers carry the mark.
 CFT_EXPORT int32_t rcl_publish(const void *publisher, const void *ros_message, void *allocation);
 int32_t rcl_publish(const void *publisher, const void *ros_message, void *allocation) {
@@ -299,7 +329,7 @@ int32_t rcl_publish(const void *publisher, const void *ros_message, void *alloca
                                                                         : NULL;
   if (routing != NULL) {
     void *writer = layer.datawriter(rcl.publisher_rmw_handle(publisher));
-    if (writer != NULL) layer.feedback_readers(routing, writer);
+    if (writer != NULL) layer.marked_readers(routing, writer);
   }
   return rcl.publish(publisher, ros_message, allocation);
 }

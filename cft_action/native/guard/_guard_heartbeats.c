@@ -340,7 +340,9 @@ static void *real_select_all3;
 CFT_EXPORT void cft_select_all_readers_nts3(void *self, void *group, void *locator_selector)
     __asm__(SELECT_ALL3);
 void cft_select_all_readers_nts3(void *self, void *group, void *locator_selector) {
-  if (narrowed(self, routed_write_now() ? heartbeat_all_ns() : -1)) return;
+  long interval = routed_write_now() ? heartbeat_all_ns() : -1;
+  if (interval == NEVER && cft_status_write_now()) interval = STATUS_HEARTBEAT_ALL_MS * 1000000L;
+  if (narrowed(self, interval)) return;
   select_all_fn real = (select_all_fn)cft_guard_real_in_caller(&real_select_all3, SELECT_ALL3,
                                                                __builtin_return_address(0));
   if (real != NULL) real(self, group, locator_selector);  // else unreachable: Fast DDS called us

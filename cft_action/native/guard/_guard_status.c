@@ -115,6 +115,14 @@
   "_ZN8eprosima8fastrtps4rtps11ReaderProxy21from_unsent_to_statusERKNS1_16SequenceNumber_tE" \
   "NS1_23ChangeForReaderStatus_tEbb"
 
+// Fast DDS 3.x's (the same members, in eprosima::fastdds::rtps).
+#define CHANGE_REMOVED3 \
+  "_ZN8eprosima7fastdds4rtps11ReaderProxy23change_has_been_removedERKNS1_16SequenceNumber_tE"
+#define CHANGE_IS_ACKED3 \
+  "_ZNK8eprosima7fastdds4rtps11ReaderProxy15change_is_ackedERKNS1_16SequenceNumber_tE"
+#define RTPS_IS_RELEVANT3 \
+  "_ZNK8eprosima7fastdds4rtps11ReaderProxy16rtps_is_relevantEPNS1_13CacheChange_tE"
+
 #define STATUS_TOPIC_PREFIX "rt/"
 #define STATUS_TOPIC_SUFFIX "/_action/status"
 #define STATUS_TYPE "action_msgs::msg::dds_::GoalStatusArray_"
@@ -267,22 +275,37 @@ static bool owed(void) {
 typedef void (*removed_fn)(void *self, const void *sequence);
 typedef bool (*acked_fn)(const void *self, const void *sequence);
 typedef bool (*relevant_fn)(const void *self, void *change);
-static void *real_removed, *real_acked, *real_relevant;
+// Each family's real members: [0] Fast DDS 2.14's, [1] 3.x's.
+static void *real_removed[2], *real_acked[2], *real_relevant[2];
+static const char *const removed_name[2] = {CHANGE_REMOVED, CHANGE_REMOVED3};
+static const char *const acked_name[2] = {CHANGE_IS_ACKED, CHANGE_IS_ACKED3};
+static const char *const relevant_name[2] = {RTPS_IS_RELEVANT, RTPS_IS_RELEVANT3};
 
-CFT_EXPORT void cft_change_has_been_removed(void *self, const void *sequence)
-    __asm__(CHANGE_REMOVED);
-void cft_change_has_been_removed(void *self, const void *sequence) {
-  const void *caller = __builtin_return_address(0);
-  removed_fn real = (removed_fn)cft_guard_real_in_caller(&real_removed, CHANGE_REMOVED, caller);
+// ReaderProxy::change_has_been_removed of family `fam`, called from `caller`.
+static void change_removed(int fam, void *self, const void *sequence, const void *caller) {
+  removed_fn real = (removed_fn)cft_guard_real_in_caller(&real_removed[fam], removed_name[fam],
+                                                         caller);
   if (frame != NULL && __atomic_load_n(&status_readers, __ATOMIC_RELAXED)) {
-    acked_fn acked = (acked_fn)cft_guard_real_in_caller(&real_acked, CHANGE_IS_ACKED, caller);
+    acked_fn acked = (acked_fn)cft_guard_real_in_caller(&real_acked[fam], acked_name[fam], caller);
     if (acked != NULL && !acked(self, sequence)) {
       if (frame->count < CFT_STATUS_FRAME_READERS) frame->readers[frame->count++] = self;
       else frame->overflow = true;
     }
   }
   if (real != NULL) real(self, sequence);
-  else cft_say("no real %s: the guard cannot forward it", CHANGE_REMOVED);
+  else cft_say("no real %s: the guard cannot forward it", removed_name[fam]);
+}
+
+CFT_EXPORT void cft_change_has_been_removed(void *self, const void *sequence)
+    __asm__(CHANGE_REMOVED);
+void cft_change_has_been_removed(void *self, const void *sequence) {
+  change_removed(0, self, sequence, __builtin_return_address(0));
+}
+
+CFT_EXPORT void cft_change_has_been_removed3(void *self, const void *sequence)
+    __asm__(CHANGE_REMOVED3);
+void cft_change_has_been_removed3(void *self, const void *sequence) {
+  change_removed(1, self, sequence, __builtin_return_address(0));
 }
 
 struct asking_state {
@@ -294,15 +317,25 @@ static void restore_asking(const struct asking_state *saved) {
   asked_change = saved->change;
 }
 
-CFT_EXPORT bool cft_rtps_is_relevant(const void *self, void *change) __asm__(RTPS_IS_RELEVANT);
-bool cft_rtps_is_relevant(const void *self, void *change) {
-  relevant_fn real = (relevant_fn)cft_guard_real_in_caller(&real_relevant, RTPS_IS_RELEVANT,
-                                                 __builtin_return_address(0));
+// ReaderProxy::rtps_is_relevant of family `fam`, called from `caller`.
+static bool is_relevant(int fam, const void *self, void *change, const void *caller) {
+  relevant_fn real = (relevant_fn)cft_guard_real_in_caller(&real_relevant[fam],
+                                                           relevant_name[fam], caller);
   if (real == NULL) return true;  // deliver, as to a reader without a filter
   const struct asking_state saved __attribute__((cleanup(restore_asking))) = {asking, asked_change};
   asking = self;
   asked_change = change;
   return real(self, change);
+}
+
+CFT_EXPORT bool cft_rtps_is_relevant(const void *self, void *change) __asm__(RTPS_IS_RELEVANT);
+bool cft_rtps_is_relevant(const void *self, void *change) {
+  return is_relevant(0, self, change, __builtin_return_address(0));
+}
+
+CFT_EXPORT bool cft_rtps_is_relevant3(const void *self, void *change) __asm__(RTPS_IS_RELEVANT3);
+bool cft_rtps_is_relevant3(const void *self, void *change) {
+  return is_relevant(1, self, change, __builtin_return_address(0));
 }
 
 // An owed change for the reader asking: relevant, and not sent with this write.
@@ -403,14 +436,15 @@ static int8_t status_at(const uint8_t *body, size_t pos) {
 static __thread size_t *mine;
 static __thread size_t mine_capacity;
 
-bool cft_status_verdict(void **program, const void *payload, const void *reader_guid) {
+// The verdict on a sample's CDR body (`body`, `length` bytes, `little` endian; NULL: not plain
+// CDR) for a kept reader whose record is *program.
+static bool judge_body(void **program, const uint8_t *body, uint32_t length, bool little,
+                       const void *reader_guid) {
   struct record *r = *program;
   count(VERDICTS);
   if (frame != NULL) frame->judged = true;
   bool is_owed = owed();
-  uint32_t length, n = 0;
-  bool little;
-  const uint8_t *body = cft_cdr_body(payload, &length, &little);
+  uint32_t n = 0;
   size_t end = 4;
   if (body != NULL && length >= 4) {
     n = read_u32(body, little);
@@ -459,6 +493,36 @@ bool cft_status_verdict(void **program, const void *payload, const void *reader_
   }
   return true;
 }
+
+bool cft_status_verdict(void **program, const void *payload, const void *reader_guid) {
+  uint32_t length = 0;
+  bool little = false;
+  const uint8_t *body = cft_cdr_body(payload, &length, &little);
+  return judge_body(program, body, length, little, reader_guid);
+}
+
+// ---- Fast DDS 3.3+: the status writer's prefilter asks (fastdds3/_prefilter.cpp) -----------------
+bool cft_status_is_topic(const char *topic) {
+  return topic != NULL && strlen(topic) > strlen(STATUS_TOPIC_SUFFIX) &&
+         cft_ends_with(topic, STATUS_TOPIC_SUFFIX);
+}
+
+const char *cft_status_unroutable(void) {
+  const char *text = getenv("CFT_GUARD_STATUS");
+  return text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0)
+             ? "CFT_GUARD_STATUS is off"
+             : NULL;
+}
+
+int cft_status_judge(void **record, const uint8_t *data, uint32_t length, const uint8_t *reader) {
+  if (*record == NULL && (*record = record_new(16)) == NULL) return 1;  // no memory: it passes
+  cft_write_judged(CFT_KEPT_READER);
+  bool plain = data != NULL && length >= 4 && data[0] == 0 && data[1] <= 1;
+  return cft_write_passes(judge_body(record, plain ? data + 4 : NULL, plain ? length - 4 : 0,
+                                     plain && data[1] == 1, reader));
+}
+
+void cft_status_forget(void *record) { free(record); }
 
 // ---- the status writer's heartbeat period ---------------------------------------------------------
 #if WRITER_TIMES_KNOWN

@@ -5,6 +5,7 @@
 #define CFT_ACTION_GUARD_STATUS_H_
 
 #include <stdbool.h>
+#include <stdint.h>
 
 #ifndef CFT_EXPORT
 #define CFT_EXPORT __attribute__((visibility("default")))
@@ -24,6 +25,17 @@ bool cft_status_keeps(const char *topic, const char *type);
 // not known), or when the reader is owed it (see _guard_status.c). *record is the reader's record,
 // which the verdict may move (realloc) as it grows.
 bool cft_status_verdict(void **record, const void *payload, const void *reader_guid);
+
+// Fast DDS 3.3+, where the status writer's sample prefilter (fastdds3/_prefilter.cpp, through
+// _guard_endpoints.c) asks: whether `topic` (a fully qualified ROS topic name) is an action's
+// status topic; why its writer is not to be routed (CFT_GUARD_STATUS off), or NULL; the verdict
+// for a reader that asked for its own goals' status (`data`, `length` bytes, encapsulation
+// included; *record is the reader's, made at its first verdict, which cft_status_forget frees),
+// told to the write's frame as _guard_feedback.c's.
+bool cft_status_is_topic(const char *topic);
+const char *cft_status_unroutable(void);
+int cft_status_judge(void **record, const uint8_t *data, uint32_t length, const uint8_t *reader);
+void cft_status_forget(void *record);
 
 // The StatefulWriter of a write that judged a kept status reader (cft_status_write_now), as
 // _guard_heartbeats.c sees it: heartbeats every CFT_GUARD_STATUS_HEARTBEAT_MS from now on.

@@ -40,4 +40,5 @@ CFT_EXPORT const char *cft_fastdds3_layer_refused(void) {
 
 // The marks the layer reads and writes (native/_filter_class.h), for cft_action._rcl.
 CFT_EXPORT const char *cft_fastdds3_reader_mark(void) { return CFT_READER_MARK; }
+CFT_EXPORT const char *cft_fastdds3_status_reader_mark(void) { return CFT_STATUS_READER_MARK; }
 CFT_EXPORT const char *cft_fastdds3_writer_mark(void) { return CFT_WRITER_MARK; }

@@ -3,8 +3,9 @@
 // The server guard's Fast DDS 3 layer: the guard's per-reader decisions, given to a Fast DDS 3.3+
 // writer through its public API. It decides nothing itself: which reader gets which sample is the
 // family-free parts' (_guard_replies.c's cft_reply_verdict, _guard_feedback.c's
-// cft_feedback_verdict, passed in); this file only carries their answer to Fast DDS, and tells
-// the feedback verdict which readers asked for it (their USER_DATA, read outside the prefilter).
+// cft_feedback_verdict, _guard_status.c's cft_status_judge, passed in); this file only carries
+// their answer to Fast DDS, and tells the verdicts which readers asked for them (their USER_DATA,
+// read outside the prefilter), with each such reader's state.
 //
 // It stands on `DataWriter::set_sample_prefilter(std::shared_ptr<IContentFilter>)` (Fast DDS 3.3+,
 // fastdds/dds/publisher/DataWriter.hpp): the writer asks the prefilter, in
@@ -73,31 +74,34 @@ class ReplyRouting final : public IContentFilter {
   const cft_reply_verdict_fn verdict_;
 };
 
-// An action's feedback writer: each sample to every reader, except that a reader whose discovery
-// data carries the reader mark gets only what `verdict` does not refuse. Which readers carry it is
-// learnt outside the prefilter (readers()), never inside it: evaluate runs under the writer's
-// mutex, and DataWriter::get_matched_subscription_data takes the participant's discovery lock,
-// which the discovery thread holds when it takes writers' mutexes. A reader not known yet passes.
-class FeedbackRouting final : public IContentFilter {
+// An action's feedback or status writer: each sample to every reader, except that a reader whose
+// discovery data carries the reader mark gets only what the verdict does not refuse, judged with
+// that reader's state. Which readers carry it is learnt outside the prefilter (readers()), never
+// inside it: evaluate runs under the writer's mutex, and DataWriter::get_matched_subscription_data
+// takes the participant's discovery lock, which the discovery thread holds when it takes writers'
+// mutexes. A reader not known yet passes.
+class MarkedRouting final : public IContentFilter {
  public:
-  FeedbackRouting(cft_feedback_verdict_fn verdict, const char *reader_mark)
-      : verdict_(verdict), mark_(reader_mark) {}
+  MarkedRouting(const cft_marked_verdict *verdict, const char *reader_mark)
+      : verdict_(*verdict), mark_(reader_mark) {}
+
+  ~MarkedRouting() override {
+    for (auto &known : readers_) forget(known.second);
+  }
 
   bool evaluate(const SerializedPayload &payload, const FilterSampleInfo & /*info*/,
                 const GUID_t &reader_guid) const override {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      auto found = marked_.find(reader_guid);
-      if (found == marked_.end() || !found->second) return true;
-    }
+    std::lock_guard<std::mutex> lock(mutex_);
+    auto found = readers_.find(reader_guid);
+    if (found == readers_.end() || !found->second.marked) return true;
     uint8_t reader[16];
     guid_bytes(reader_guid, reader);
-    return verdict_(payload.data, payload.length, reader) != 0;
+    return verdict_.judge(&found->second.state, payload.data, payload.length, reader) != 0;
   }
 
   // The readers `writer` matches, each marked or not; only those new since the last call are
   // looked up, unless every one is due again. Returns how many are marked. At nearly every write
-  // nothing changed: then the knowledge is not copied, only compared.
+  // nothing changed: then the knowledge is only compared.
   // One caller at a time (a writer may publish from several threads); another meanwhile returns
   // -1 at once: the running one brings the knowledge up to date.
   int32_t readers(DataWriter &writer) {
@@ -106,15 +110,14 @@ class FeedbackRouting final : public IContentFilter {
     if (writer.get_matched_subscriptions(handles_) != RETCODE_OK) return -1;
     Clock::time_point now = Clock::now();
     bool all = now - read_at_ >= std::chrono::milliseconds(CFT_FASTDDS3_REREAD_MS);
-    std::map<GUID_t, bool> known;
+    std::map<GUID_t, bool> known;  // the marks known now
     {
       std::lock_guard<std::mutex> lock(mutex_);
       if (!all && knows_all()) return marked_count_;
-      known = marked_;
+      for (const auto &reader : readers_) known.emplace(reader.first, reader.second.marked);
     }
     std::map<GUID_t, bool> fresh;
     SubscriptionBuiltinTopicData data;
-    int32_t count = 0;
     for (const InstanceHandle_t &handle : handles_) {
       GUID_t guid = eprosima::fastdds::rtps::iHandle2GUID(handle);
       auto found = known.find(guid);
@@ -123,32 +126,52 @@ class FeedbackRouting final : public IContentFilter {
       } else if (writer.get_matched_subscription_data(data, handle) == RETCODE_OK) {
         fresh.emplace(guid, cft_action::user_data_holds(data.user_data.data_vec(), mark_.c_str()));
       }  // else: unmatched meanwhile, or not known to discovery: not known (passes)
-      count += fresh.count(guid) != 0 && fresh[guid];
     }
     if (all) read_at_ = now;
+    // The states move over (the verdict may have replaced one meanwhile: they are taken now).
+    std::map<GUID_t, Reader> next;
+    int32_t count = 0;
     std::lock_guard<std::mutex> lock(mutex_);
-    marked_.swap(fresh);
+    for (const auto &mark : fresh) {
+      Reader &reader = next[mark.first];
+      reader.marked = mark.second;
+      auto before = readers_.find(mark.first);
+      if (before != readers_.end() && mark.second) std::swap(reader.state, before->second.state);
+      count += mark.second;
+    }
+    for (auto &gone : readers_) forget(gone.second);
+    readers_.swap(next);
     marked_count_ = count;
     return count;
   }
 
  private:
+  struct Reader {
+    bool marked = false;
+    void *state = nullptr;  // the verdict's, for a marked reader
+  };
+
+  void forget(Reader &reader) const {
+    if (reader.state != nullptr && verdict_.forget != nullptr) verdict_.forget(reader.state);
+    reader.state = nullptr;
+  }
+
   // Whether the knowledge holds exactly the readers of handles_ (under mutex_ and reading_).
   bool knows_all() const {
-    if (handles_.size() != marked_.size()) return false;
+    if (handles_.size() != readers_.size()) return false;
     for (const InstanceHandle_t &handle : handles_)
-      if (marked_.count(eprosima::fastdds::rtps::iHandle2GUID(handle)) == 0) return false;
+      if (readers_.count(eprosima::fastdds::rtps::iHandle2GUID(handle)) == 0) return false;
     return true;
   }
 
-  const cft_feedback_verdict_fn verdict_;
+  const cft_marked_verdict verdict_;
   const std::string mark_;
-  mutable std::mutex mutex_;
-  std::map<GUID_t, bool> marked_;  // under mutex_
-  int32_t marked_count_ = 0;       // marked_'s marked readers (under mutex_)
-  std::mutex reading_;             // held by readers()
-  std::vector<InstanceHandle_t> handles_;  // the last reading's (under reading_)
-  Clock::time_point read_at_;      // the readers' last full reading (under reading_)
+  mutable std::mutex mutex_;                 // held by each verdict
+  mutable std::map<GUID_t, Reader> readers_;  // under mutex_
+  int32_t marked_count_ = 0;                 // readers_'s marked readers (under mutex_)
+  std::mutex reading_;                       // held by readers()
+  std::vector<InstanceHandle_t> handles_;    // the last reading's (under reading_)
+  Clock::time_point read_at_;                // the readers' last full reading (under reading_)
 };
 
 }  // namespace
@@ -163,14 +186,14 @@ extern "C" __attribute__((visibility("default"))) int32_t cft_fastdds3_route_rep
   }
 }
 
-// The handle is a FeedbackRouting that the writer shares (its prefilter): it lives as long as the
-// guard keeps the handle, which it does for the process's life (a few per action server).
-extern "C" __attribute__((visibility("default"))) void *cft_fastdds3_route_feedback(
-    void *datawriter, cft_feedback_verdict_fn verdict, const char *reader_mark,
+// The handle is a MarkedRouting that the writer shares (its prefilter): it lives as long as the
+// guard keeps the handle, which it does for the process's life (two per action server).
+extern "C" __attribute__((visibility("default"))) void *cft_fastdds3_route_marked(
+    void *datawriter, const cft_marked_verdict *verdict, const char *reader_mark,
     const char *writer_mark, int32_t *error) {
   auto *writer = static_cast<DataWriter *>(datawriter);
   try {
-    auto routing = std::make_shared<FeedbackRouting>(verdict, reader_mark);
+    auto routing = std::make_shared<MarkedRouting>(verdict, reader_mark);
     *error = writer->set_sample_prefilter(routing);
     if (*error != RETCODE_OK) return nullptr;
     DataWriterQos qos = writer->get_qos();
@@ -178,17 +201,17 @@ extern "C" __attribute__((visibility("default"))) void *cft_fastdds3_route_feedb
       writer->set_sample_prefilter(nullptr);
       return nullptr;
     }
-    return new std::shared_ptr<FeedbackRouting>(routing);
+    return new std::shared_ptr<MarkedRouting>(routing);
   } catch (const std::exception &) {  // no memory: the writer stays as it was
     *error = 1;                       // RETCODE_ERROR
     return nullptr;
   }
 }
 
-extern "C" __attribute__((visibility("default"))) int32_t cft_fastdds3_feedback_readers(
+extern "C" __attribute__((visibility("default"))) int32_t cft_fastdds3_marked_readers(
     void *handle, void *datawriter) {
   try {
-    return (*static_cast<std::shared_ptr<FeedbackRouting> *>(handle))->readers(
+    return (*static_cast<std::shared_ptr<MarkedRouting> *>(handle))->readers(
         *static_cast<DataWriter *>(datawriter));
   } catch (const std::exception &) {  // no memory: what was known stays
     return -1;

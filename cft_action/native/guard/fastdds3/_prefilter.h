@@ -22,20 +22,26 @@ typedef int (*cft_reply_verdict_fn)(const uint8_t *related, int32_t high, uint32
 #define CFT_FASTDDS3_ROUTE_REPLIES "cft_fastdds3_route_replies"
 typedef int32_t (*cft_fastdds3_route_replies_fn)(void *datawriter, cft_reply_verdict_fn verdict);
 
-// The guard's decision for a feedback sample (_guard_feedback.h, cft_feedback_verdict): 0 when the
-// sample (`data`, `length` bytes, encapsulation included) must not go to `reader` (16 bytes), a
-// reader that asked for its own goals' feedback only.
-typedef int (*cft_feedback_verdict_fn)(const uint8_t *data, uint32_t length, const uint8_t *reader);
+// The guard's decision for a sample of a writer routed to marked readers (an action's feedback or
+// status writer): 0 when the sample (`data`, `length` bytes, encapsulation included) must not go to
+// `reader` (16 bytes), a reader whose USER_DATA holds the routing's reader mark. *state is that
+// reader's own (NULL at first), which `judge` may set; the layer gives it to `forget` (if not NULL)
+// when the reader goes or loses its mark. Called with the routing's lock held, one at a time.
+struct cft_marked_verdict {
+  int (*judge)(void **state, const uint8_t *data, uint32_t length, const uint8_t *reader);
+  void (*forget)(void *state);
+};
 
-// Gives `datawriter` (an action's feedback writer) a sample prefilter that asks `verdict` for the
-// readers whose USER_DATA holds `reader_mark`, and passes every other sample and reader; appends
-// `writer_mark` to the writer's USER_DATA (DataWriter::set_qos), so that the readers' processes
-// see that it filters. Returns the routing's handle for CFT_FASTDDS3_FEEDBACK_READERS, or NULL
-// (*error: the ReturnCode_t of the step that failed; the writer then stays as it was).
-#define CFT_FASTDDS3_ROUTE_FEEDBACK "cft_fastdds3_route_feedback"
-typedef void *(*cft_fastdds3_route_feedback_fn)(void *datawriter, cft_feedback_verdict_fn verdict,
-                                                const char *reader_mark, const char *writer_mark,
-                                                int32_t *error);
+// Gives `datawriter` a sample prefilter that asks `verdict` for the readers whose USER_DATA holds
+// `reader_mark`, and passes every other sample and reader; appends `writer_mark` to the writer's
+// USER_DATA (DataWriter::set_qos), so that the readers' processes see that it filters. Returns the
+// routing's handle for CFT_FASTDDS3_MARKED_READERS, or NULL (*error: the ReturnCode_t of the step
+// that failed; the writer then stays as it was). `verdict` must outlive the writer.
+#define CFT_FASTDDS3_ROUTE_MARKED "cft_fastdds3_route_marked"
+typedef void *(*cft_fastdds3_route_marked_fn)(void *datawriter,
+                                              const struct cft_marked_verdict *verdict,
+                                              const char *reader_mark, const char *writer_mark,
+                                              int32_t *error);
 
 // Brings the routing `handle`'s knowledge of which readers are marked up to date with the
 // discovery data of `datawriter` (its writer): the readers matched since the last call, and every
@@ -43,9 +49,9 @@ typedef void *(*cft_fastdds3_route_feedback_fn)(void *datawriter, cft_feedback_v
 // USER_DATA can change after it matched). To be called outside any Fast DDS lock and callback
 // (DataWriter::get_matched_subscription_data takes the participant's discovery lock): the guard
 // calls it before each write of the writer (rcl_publish). Returns the marked readers' count.
-#define CFT_FASTDDS3_FEEDBACK_READERS "cft_fastdds3_feedback_readers"
+#define CFT_FASTDDS3_MARKED_READERS "cft_fastdds3_marked_readers"
 #define CFT_FASTDDS3_REREAD_MS 200
-typedef int32_t (*cft_fastdds3_feedback_readers_fn)(void *handle, void *datawriter);
+typedef int32_t (*cft_fastdds3_marked_readers_fn)(void *handle, void *datawriter);
 
 #ifdef __cplusplus
 }
