@@ -160,7 +160,8 @@ static void load_layer(void) {
   }
   if (why[0] != '\0') {
     snprintf(layer_text, sizeof layer_text, "off: %s", why);
-    cft_say("the Fast DDS 3 layer is off: %s; replies and feedback go to every client", why);
+    cft_say("the Fast DDS 3 layer is off: %s; replies, feedback and status go to every client",
+            why);
   } else {
     snprintf(layer_text, sizeof layer_text, "on: %.250s, built with %.300s", path,
              CFT_FASTDDS3_SOURCE);

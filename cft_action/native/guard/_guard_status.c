@@ -72,8 +72,19 @@
 //
 // A kept reader's record grows with its own goals only.
 //
+// Fast DDS 3.3+ (Lyrical): the library's clients cannot give their status reader the class there;
+// they mark its USER_DATA instead (CFT_STATUS_READER_MARK), and the status writer's public sample
+// prefilter (fastdds3/_prefilter.cpp, given by _guard_endpoints.c when rcl creates the publisher)
+// asks cft_status_judge for each marked reader, with the record the layer keeps for it. The same
+// write order holds there (v3.6.2: prepare_change removes the previous change before
+// unsent_change_added_to_history asks ReaderProxy::rtps_is_relevant, whose
+// DataWriterImpl::is_relevant asks the prefilter), so change_has_been_removed and rtps_is_relevant
+// are defined under 3.x's names too, and owed samples are told alike. They are sent with the
+// write: deferring them and the 100 ms heartbeat read 2.14's layouts.
+//
 // Soundness rules:
-// - Only where _guard.c locks the Fast DDS 2.14 it knows, with its layouts and rmw's from headers.
+// - Only where _guard.c locks the Fast DDS 2.14 it knows, with its layouts and rmw's from headers;
+//   on Fast DDS 3.3+, only through the layer's prefilter.
 // - Only a reader of `rt/.../_action/status` of type action_msgs::msg::dds_::GoalStatusArray_.
 // - A sample that does not read as plain CDR GoalStatusArray passes, and empties the record.
 // - The interposed Fast DDS members always call the real ones, found in the library that called
