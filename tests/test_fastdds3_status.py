@@ -16,8 +16,8 @@ import os
 import pytest
 
 from tests.test_fastdds3_replies import MISSING
-from tests.test_status_wire import (assert_no_stale_handle, assert_own_or_owed, BURST, MIXED,
-                                    status_on_the_wire, status_samples)
+from tests.test_status_wire import (assert_no_stale_handle, assert_own_or_owed, BURST, mixed_run,
+                                    status_off_run, status_on_the_wire)
 
 pytestmark = [
     pytest.mark.skipif(MISSING is not None, reason=MISSING or ''),
@@ -26,16 +26,9 @@ pytestmark = [
 
 
 def test_each_client_receives_the_status_samples_of_its_own_goals() -> None:
-    """The plain client receives every status sample, each of the library's clients (every
-    feedback filter mode) a subset, each changing one of its goals or owed; every goal handle
-    ends SUCCEEDED."""
-    run = status_on_the_wire(MIXED)
-    assert_no_stale_handle(run, MIXED)
-    assert_own_or_owed(run, MIXED)
-    plain, *routed = status_samples(run)
-    assert len(routed) == len(MIXED) - 1, run.captured.keys()
-    for samples in routed:
-        assert samples <= plain, (len(samples), len(plain))
+    """tests/test_status_wire.py's mixed_run: the library's clients receive the samples that change
+    their goals, or owed ones, through the status writer's prefilter (one kept writer)."""
+    run = mixed_run()
     status = run.stats_after['guard_status']
     assert status['kept'] == 1 and status['verdicts'] > 0 and status['withheld'] > 0, status
     assert status['unknown'] == status['malformed'] == 0, status
@@ -54,11 +47,6 @@ def test_bursts_of_transitions_leave_no_goal_handle_behind() -> None:
 
 def test_with_the_status_filter_off_every_client_receives_every_sample() -> None:
     """``CFT_GUARD_STATUS=off``: the status writer sends as rmw_fastrtps does, said once."""
-    clients = (('client', 2, 3), ('rclpy', 2, 3))
-    run = status_on_the_wire(clients, server_env={'CFT_GUARD_STATUS': 'off'})
-    assert_no_stale_handle(run, clients)
-    samples = status_samples(run)
-    assert len(samples) == 2 and samples[0] == samples[1], [len(s) for s in samples]
-    assert run.stats_after['guard_status']['verdicts'] == 0
+    run = status_off_run()
     said = [line for line in run.server_lines if 'status goes to every client' in line]
     assert len(said) == 1, run.server_lines

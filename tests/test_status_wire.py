@@ -92,13 +92,10 @@ def assert_own_or_owed(run: WireRun, clients: Sequence[tuple[str, int, int]]) ->
 MIXED = (('client', 3, 5), ('goals', 3, 5), ('off', 3, 5), ('rclpy', 3, 5))
 
 
-def test_each_client_receives_the_status_samples_of_its_own_goals() -> None:
-    """Under the guard: the plain client receives every status sample the server wrote, each of
-    the library's clients (every feedback filter mode) a subset of them, each changing one of its
-    own goals or owed, the guard withholds some (after the held goals' quiet every reader has
-    acknowledged, so the first sample of the release is withheld from the clients whose goals it
-    does not change), none carries a filter signature, and every goal handle of every client ends
-    SUCCEEDED."""
+def mixed_run() -> WireRun:
+    """MIXED under the guard, checked: every goal handle ends SUCCEEDED, the plain client receives
+    every status sample the server wrote, each of the library's clients (every feedback filter
+    mode) a subset of them, each changing one of its own goals or owed."""
     run = status_on_the_wire(MIXED)
     assert_no_stale_handle(run, MIXED)
     assert_own_or_owed(run, MIXED)
@@ -109,6 +106,14 @@ def test_each_client_receives_the_status_samples_of_its_own_goals() -> None:
     # the library get all 36, every one its own change or owed). assert_own_or_owed is the rule.
     for samples in filtered:
         assert samples <= plain, (len(samples), len(plain))
+    return run
+
+
+def test_each_client_receives_the_status_samples_of_its_own_goals() -> None:
+    """Under the guard (mixed_run), the guard withholds some samples (after the held goals' quiet
+    every reader has acknowledged, so the first sample of the release is withheld from the clients
+    whose goals it does not change), and none carries a filter signature."""
+    run = mixed_run()
     assert all(set(seen.samples.values()) == {None} for seen in run.captured.values())
     status = run.stats_after['guard_status']
     assert status['verdicts'] > 0 and status['withheld'] > 0, status
@@ -133,11 +138,17 @@ def test_bursts_of_transitions_leave_no_goal_handle_behind() -> None:
     assert status['deferred'] > 0 and status['heartbeat_periods'] == 1, status
 
 
-def test_with_the_status_filter_off_every_client_receives_every_sample() -> None:
-    """``CFT_GUARD_STATUS=off``: the guarded server's status writer sends as rmw_fastrtps does."""
+def status_off_run() -> WireRun:
+    """``CFT_GUARD_STATUS=off``, checked: the guarded server's status writer sends as rmw_fastrtps
+    does, and every goal handle ends SUCCEEDED."""
     clients = (('client', 2, 3), ('rclpy', 2, 3))
     run = status_on_the_wire(clients, server_env={'CFT_GUARD_STATUS': 'off'})
     assert_no_stale_handle(run, clients)
     samples = status_samples(run)
     assert len(samples) == 2 and samples[0] == samples[1], [len(s) for s in samples]
     assert run.stats_after['guard_status']['verdicts'] == 0
+    return run
+
+
+def test_with_the_status_filter_off_every_client_receives_every_sample() -> None:
+    status_off_run()
