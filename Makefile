@@ -48,7 +48,7 @@ KILTED_VENV ?= .venv-kilted
 KILTED_PYTHON ?= python3.12
 KILTED_TREE := build/kilted-tree
 KILTED_TESTS ?= tests/test_fastdds3.py tests/test_fastdds3_replies.py tests/test_fastdds3_feedback.py \
-    tests/test_fastdds3_status.py \
+    tests/test_fastdds3_status.py tests/test_sros2.py \
     tests/test_build_without_headers.py tests/test_rclpy_contract.py tests/test_errors.py \
     tests/test_sql.py tests/test_filters.py
 # The wheels, by a first install (not in place; its build is replaced by the tree's below).

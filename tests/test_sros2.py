@@ -1,14 +1,14 @@
 """DDS Security (SROS2): a guarded server and the library's clients, each in an enclave of its own.
 
 Runs where the loaded Fast DDS was built with security (apt's 2.14.6: ``make compat
-COMPAT_STACKS=apt-2.14.6``); the wheels' Fast DDS has none (``HAVE_SECURITY 0``), so in ``make
-test`` every test here skips, saying so. Each test makes its keystore in rcl's layout
-(:class:`harness.keystore.Keystore`), with a governance that protects discovery, liveliness, whole
-messages, submessages and payloads at ENCRYPT, or at SIGN, and runs every process Enforce in an
-enclave of its own. At SIGN the payloads are not signed: Fast DDS 2.14.6's readers refuse signed
-payloads of their own accord (``Error decoding encoded payload``; measured with plain rclpy alone:
-no status sample came, and feedback stopped after 27 or 35 of 50 messages per goal with two plain
-clients; docs/COMPATIBILITY.md), which no client can help.
+COMPAT_STACKS=apt-2.14.6``; Lyrical's 3.6.2: ``make compat-kilted``); the wheels' Fast DDS has none
+(``HAVE_SECURITY 0``), so in ``make test`` every test here skips, saying so. Each test makes its
+keystore in rcl's layout (:class:`harness.keystore.Keystore`), with a governance that protects
+discovery, liveliness, whole messages, submessages and payloads at ENCRYPT, or at SIGN, and runs
+every process Enforce in an enclave of its own. At SIGN the payloads are not signed: Fast DDS
+2.14.6's readers refuse signed payloads of their own accord (``Error decoding encoded payload``;
+measured with plain rclpy alone: no status sample came, and feedback stopped after 27 or 35 of 50
+messages per goal with two plain clients; docs/COMPATIBILITY.md), which no client can help.
 
 What is promised is what holds without security: every goal's result, feedback, status and replies
 reach their client and no other, filtered on the server's writer. On the wire (a raw socket on
@@ -37,8 +37,12 @@ from harness.proc import stop_all
 from harness.ros import unique_name
 from tests.support import WireRun, action_server, clients_on_the_wire, helper_process
 
-#: SecurityManager::cancel_init(), which only a Fast DDS 2.14 built with SECURITY=ON exports.
-SECURITY_SYMBOL = '_ZN8eprosima8fastrtps4rtps8security15SecurityManager11cancel_initEv'
+#: SecurityManager::cancel_init(), which only a Fast DDS built with SECURITY=ON exports: 2.14's and
+#: 3.x's name.
+SECURITY_SYMBOLS = ('_ZN8eprosima8fastrtps4rtps8security15SecurityManager11cancel_initEv',
+                    '_ZN8eprosima7fastdds4rtps8security15SecurityManager11cancel_initEv')
+#: Whether the loaded Fast DDS is a 3.x (the guard's Fast DDS 3 layer; no merged personal GAPs).
+FASTDDS3 = 'libfastdds.so.3' in fastdds_library()
 
 
 def security_missing() -> Optional[str]:
@@ -48,9 +52,10 @@ def security_missing() -> Optional[str]:
         return f'no Fast DDS 2.14 to run with security ({path})'
     # Read from the file, not loaded: this runs at collection, and the suite's other tests load
     # Fast DDS when and as rclpy does (the reader lock interposes its members).
-    if SECURITY_SYMBOL.encode() not in Path(path).read_bytes():
+    content = Path(path).read_bytes()
+    if not any(symbol.encode() in content for symbol in SECURITY_SYMBOLS):
         return (f'{path} was built without security (HAVE_SECURITY 0, as the wheels\' is): '
-                '`make compat COMPAT_STACKS=apt-2.14.6` runs these tests')
+                '`make compat COMPAT_STACKS=apt-2.14.6` and `make compat-kilted` run these tests')
     return None
 
 
@@ -126,7 +131,9 @@ def test_each_enclave_gets_its_own_goals_filtered_on_the_writer(keystore: Keysto
             assert report['complete_goals'] == GOALS, (mode, report)
             assert report['filtered_in'] == 'writer', (mode, report)
             # the others' replies never came: the guard filtered them in the server's writers
-            assert report['responses_dropped'] == 0 < report['responses_passed'], (mode, report)
+            # (the client's response filter, which counts them, reads Fast DDS 2.14 layouts)
+            assert report['responses_dropped'] == 0, (mode, report)
+            assert FASTDDS3 or report['responses_passed'] > 0, (mode, report)
     status = {k: v - run.stats_at_go['guard_status'][k] for k, v in
               run.stats_after['guard_status'].items()}
     replies = {k: v - run.stats_at_go['guard_replies'][k] for k, v in
@@ -150,6 +157,7 @@ def test_each_enclave_gets_its_own_goals_filtered_on_the_writer(keystore: Keysto
 
 
 @needs_root
+@pytest.mark.skipif(FASTDDS3, reason='the personal GAP merge reads Fast DDS 2.14 layouts')
 def test_personal_gaps_ride_in_the_data_under_protection(keystore: Keystore) -> None:
     """Two clients of the library alone on a writer of rclpy's feedback depth: each one's sample
     after the other's follows a run filtered out for it, whose GAP and HEARTBEAT the guard puts in
