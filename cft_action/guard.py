@@ -394,7 +394,10 @@ def status_counts() -> dict[str, int]:
     client. The guard sends a sample to a client of this library only when it changes the status of
     a goal that the client's participant requested, or when the client had been passed the sample
     before it and had not acknowledged it when it was replaced (cft_action/native/guard/
-    _guard_status.c). Plain clients get every sample. ``CFT_GUARD_STATUS=off`` turns it off. Keys:
+    _guard_status.c). Plain clients get every sample. ``CFT_GUARD_STATUS=off`` turns it off. On Fast
+    DDS 3.3+ (Lyrical) the status writer's public sample prefilter asks the same verdict for the
+    clients' marked status readers; there owed samples go with the write (``deferred`` and
+    ``heartbeat_periods`` stay 0) and ``kept`` counts routed status writers. Keys:
 
     - ``requests``: goal requests taken, recorded with the participant that sent them;
     - ``implausible``: goal requests whose header did not name a user endpoint (not recorded);

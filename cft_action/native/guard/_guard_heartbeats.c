@@ -70,15 +70,16 @@
 //
 // Fast DDS 3.4.2+ (Lyrical's 3.6) sends the same HEARTBEAT and GAPs (StatefulWriter.cpp of v3.6.2:
 // deliver_sample_to_network, send_heartbeat_piggyback_nts_ with two parameters) to the readers a
-// routed feedback writer's prefilter withholds samples from (_guard_feedback.c): about two datagrams
-// per withheld sample, which cost the server 2.1x plain's CPU per message at rclpy's depth. Parts 1
-// and 2 act there too, in a write whose frame says it asked a routed reader's verdict (the
-// prefilter runs in the write, under perform_create_new_change: _guard.c opens the frame), and
-// nowhere else: other writers, and a write delivered by another thread (an asynchronous
-// publication mode), go as Fast DDS sends them. The real members are those of the library that
-// called (cft_guard_real_in_caller). N = 16 clients x 4 goals, depth 10: 0.19x plain's bytes per
-// client and 0.42x its CPU per message, where Fast DDS's own had 1.35x and 2.1-2.3x; the personal
-// GAP and HEARTBEAT still come alone before a routed reader's DATA (part 4 reads 2.14's layouts).
+// routed writer's prefilter withholds samples from (feedback, status: _guard_feedback.c,
+// _guard_status.c): about two datagrams per withheld sample, which cost the server 2.1x plain's
+// CPU per message at rclpy's feedback depth. Parts 1 and 2 act there too, in a write whose frame
+// says it asked a routed reader's verdict (the prefilter runs in the write, under
+// perform_create_new_change: _guard.c opens the frame), and nowhere else: other writers, and a
+// write delivered by another thread (an asynchronous publication mode), go as Fast DDS sends them.
+// The real members are those of the library that called (cft_guard_real_in_caller). N = 16
+// clients x 4 goals, depth 10, feedback routed: 0.19x plain's bytes per client and 0.42-0.54x its
+// CPU per message, where Fast DDS's own had 1.35x and 2.1-2.3x; the personal GAP and HEARTBEAT
+// still come alone before a routed reader's DATA (part 4 reads 2.14's layouts).
 //
 // These members are exported and called through the PLT. A call from deliver_sample_to_network is
 // told by the return address, whose symbol dladdr names once per call site; one from the
@@ -270,9 +271,9 @@ static bool gaps_deferred(void) {
 }
 
 // Where the guard acts on Fast DDS 3: in a write that asked the verdict of a reader it routes
-// samples to (fastdds3/_prefilter.cpp, for a writer routed under CFT_GUARD_FEEDBACK=on). Every
-// other writer, and every write on a thread other than the writing one (asynchronous
-// publication), stays as Fast DDS sends it.
+// samples to (fastdds3/_prefilter.cpp: an action's feedback or status writer). Every other writer,
+// and every write on a thread other than the writing one (asynchronous publication), stays as
+// Fast DDS sends it.
 static bool routed_write_now(void) { return (cft_write_judged_now() & CFT_KEPT_READER) != 0; }
 
 // ---- 1. the HEARTBEAT to all readers ------------------------------------------------------------
