@@ -115,14 +115,10 @@ static void restore_filtering_writer(const void **saved) { cft_filtering_writer 
 // Opens _guard_status.c's frame of the write for the enclosing block, and closes it however the
 // block is left. Every family has it: on Fast DDS 3 the verdicts of routed readers mark it
 // (_guard_feedback.c), for _guard_heartbeats.c.
-static void close_status_frame(struct cft_status_frame **frame) {
-  if (*frame != NULL) cft_status_frame_close(*frame);
-}
+static void close_status_frame(struct cft_status_frame *frame) { cft_status_frame_close(frame); }
 #define STATUS_FRAME_IN_SCOPE()                                                                  \
-  struct cft_status_frame status_frame_;                                                         \
-  struct cft_status_frame *status_frame_open_ __attribute__((cleanup(close_status_frame))) =    \
-      &status_frame_;                                                                            \
-  cft_status_frame_open(status_frame_open_)
+  struct cft_status_frame status_frame_ __attribute__((cleanup(close_status_frame)));           \
+  cft_status_frame_open(&status_frame_)
 
 // The writer whose process_reader_filter_info runs on this thread, when the guard keeps the
 // writer's filters of the library's classes (Fast DDS 2.14): a filter created now is that

@@ -212,7 +212,7 @@ int32_t rcl_service_init(void *service, const void *node, const void *type_suppo
   return init_endpoint(true, service, node, type_support, service_name, options);
 }
 
-// ---- feedback publishers ----------------------------------------------------------------------------
+// ---- routed publishers: an action's feedback and status -----------------------------------------
 // The routed publishers (rcl_publisher_t *, never read) with the layer's handle: a few per process
 // (two per action server); past ROUTED_MAX, a writer stays as rmw made it, said.
 #define ROUTED_MAX 64
@@ -277,14 +277,14 @@ static const struct routed_kind {
 };
 #define KINDS ((int)(sizeof kinds / sizeof kinds[0]))
 
-// `publisher`, of `topic`, one of `kind`'s, gets its samples routed, or says once why not.
+// `publisher`, of `topic`, one of `kind`'s, in a process of Fast DDS 3, gets its samples routed,
+// or says once why not.
 static void route(const void *publisher, const char *topic, int kind) {
   const struct routed_kind *k = &kinds[kind];
   const char *unroutable = k->unroutable();
   if (unroutable != NULL) {
     static int said[KINDS];
-    if (CFT_FASTDDS3_PREFILTER && cft_loaded_family() == 1 &&
-        !__atomic_exchange_n(&said[kind], 1, __ATOMIC_ACQ_REL))
+    if (CFT_FASTDDS3_PREFILTER && !__atomic_exchange_n(&said[kind], 1, __ATOMIC_ACQ_REL))
       cft_say("%s goes to every client as rmw_fastrtps sends it: %s", k->what, unroutable);
     return;
   }

@@ -24,6 +24,7 @@
 
 #include "_guard_families.h"
 #include "_guard_log.h"
+#include "_guard_text.h"
 
 static struct family families[] = {
   {"Fast DDS 2", {"libfastrtps.so.2.14"}, "libfastrtps.so", {PCNC2, PRFI2, RRF2, EVAL2, FIND, REL2},
@@ -291,9 +292,7 @@ int cft_loaded_family(void) {
 bool cft_guard_part_on(int *cache, const char *env, bool usable) {
   int v = __atomic_load_n(cache, __ATOMIC_RELAXED);
   if (v >= 0) return v;
-  const char *text = getenv(env);
-  v = !(text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0)) && usable &&
-      cft_guard_knows_fastdds2();
+  v = !cft_env_off(env) && usable && cft_guard_knows_fastdds2();
   __atomic_store_n(cache, v, __ATOMIC_RELAXED);
   return v;
 }

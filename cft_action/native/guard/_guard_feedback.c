@@ -31,21 +31,18 @@
 #include <stdlib.h>
 #include <string.h>
 
+#include "_cdr.h"
 #include "_guard_goals.h"
 #include "_guard_status.h"
 #include "_guard_text.h"
 
 #define FEEDBACK_SUFFIX "/_action/feedback"
-#define ENCAPSULATION_SIZE 4
 
 enum { WRITERS, VERDICTS, WITHHELD, UNKNOWN, MALFORMED, COUNTERS };
 static unsigned long counters[COUNTERS];
 static void count(int which) { __atomic_fetch_add(&counters[which], 1, __ATOMIC_RELAXED); }
 
-bool cft_feedback_wanted(void) {
-  const char *text = getenv("CFT_GUARD_FEEDBACK");
-  return !(text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0));
-}
+bool cft_feedback_wanted(void) { return !cft_env_off("CFT_GUARD_FEEDBACK"); }
 
 const char *cft_feedback_unroutable(void) {
   if (!cft_feedback_wanted()) return "CFT_GUARD_FEEDBACK is off";
@@ -57,19 +54,19 @@ const char *cft_feedback_unroutable(void) {
   return NULL;
 }
 
-bool cft_feedback_is_topic(const char *topic) {
-  return topic != NULL && strlen(topic) > strlen(FEEDBACK_SUFFIX) &&
-         cft_ends_with(topic, FEEDBACK_SUFFIX);
-}
+bool cft_feedback_is_topic(const char *topic) { return cft_ends_after(topic, FEEDBACK_SUFFIX); }
 
 // 1 when the sample goes to the reader, 0 when not: see the soundness rules.
 static int verdict_of(const uint8_t *data, uint32_t length, const uint8_t *reader_guid) {
-  // Plain CDR, big (0x0000) or little endian (0x0001): a uint8[16] needs no alignment.
-  if (data == NULL || length < ENCAPSULATION_SIZE + CFT_UUID_SIZE || data[0] != 0 || data[1] > 1) {
+  // Plain CDR, of either byte order: a uint8[16] needs no alignment.
+  uint32_t body_length = 0;
+  bool little;
+  const uint8_t *body = cft_cdr_bytes(data, length, &body_length, &little);
+  if (body == NULL || body_length < CFT_UUID_SIZE) {
     count(MALFORMED);
     return 1;
   }
-  switch (cft_goal_owner(data + ENCAPSULATION_SIZE, reader_guid)) {
+  switch (cft_goal_owner(body, reader_guid)) {
     case CFT_GOAL_OTHERS:
       count(WITHHELD);
       return 0;

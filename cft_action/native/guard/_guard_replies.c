@@ -64,6 +64,7 @@
 #include "_guard_filter.h"
 #include "_guard_log.h"
 #include "_guard_replies.h"
+#include "_guard_text.h"
 
 #define FASTDDS2_SONAME "libfastrtps.so.2.14"
 #define WRITER_GUID_NAME "_ZNK8eprosima7fastdds3dds14DataWriterImpl4guidEv"
@@ -85,10 +86,7 @@ static bool replies_on(void) {
   return cft_guard_part_on(&on, "CFT_GUARD_REPLIES", CFT_LAYOUT_KNOWN);
 }
 
-bool cft_replies_wanted(void) {
-  const char *text = getenv("CFT_GUARD_REPLIES");
-  return !(text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0));
-}
+bool cft_replies_wanted(void) { return !cft_env_off("CFT_GUARD_REPLIES"); }
 
 // Whether `name` ends in one of an action's service names, after at least one character, and then
 // in `tail` (a ROS service name: ""; rmw_fastrtps's reply topic: "Reply").

@@ -513,24 +513,19 @@ bool cft_status_verdict(void **program, const void *payload, const void *reader_
 }
 
 // ---- Fast DDS 3.3+: the status writer's prefilter asks (fastdds3/_prefilter.cpp) -----------------
-bool cft_status_is_topic(const char *topic) {
-  return topic != NULL && strlen(topic) > strlen(STATUS_TOPIC_SUFFIX) &&
-         cft_ends_with(topic, STATUS_TOPIC_SUFFIX);
-}
+bool cft_status_is_topic(const char *topic) { return cft_ends_after(topic, STATUS_TOPIC_SUFFIX); }
 
 const char *cft_status_unroutable(void) {
-  const char *text = getenv("CFT_GUARD_STATUS");
-  return text != NULL && (strcmp(text, "off") == 0 || strcmp(text, "0") == 0)
-             ? "CFT_GUARD_STATUS is off"
-             : NULL;
+  return cft_env_off("CFT_GUARD_STATUS") ? "CFT_GUARD_STATUS is off" : NULL;
 }
 
 int cft_status_judge(void **record, const uint8_t *data, uint32_t length, const uint8_t *reader) {
   if (*record == NULL && (*record = record_new(16)) == NULL) return 1;  // no memory: it passes
   cft_write_judged(CFT_KEPT_READER);
-  bool plain = data != NULL && length >= 4 && data[0] == 0 && data[1] <= 1;
-  return cft_write_passes(judge_body(record, plain ? data + 4 : NULL, plain ? length - 4 : 0,
-                                     plain && data[1] == 1, reader));
+  uint32_t body_length = 0;
+  bool little = false;
+  const uint8_t *body = cft_cdr_bytes(data, length, &body_length, &little);
+  return cft_write_passes(judge_body(record, body, body_length, little, reader));
 }
 
 void cft_status_forget(void *record) { free(record); }
