@@ -318,6 +318,12 @@ class WireRun(NamedTuple):
     stats_after: dict[str, Any]
     server_lines: list[str]
 
+    def counted(self, part: str) -> dict[str, int]:
+        """The server's counters ``part`` of its stats (e.g. ``guard_heartbeats``) over the goals:
+        at the end less at ``go``."""
+        before = self.stats_at_go[part]
+        return {key: value - before[key] for key, value in self.stats_after[part].items()}
+
 
 def clients_on_the_wire(clients: Sequence[Sequence[object]], capture: Callable[..., dict],
                         writers: Sequence[str] = ('feedback',), *, guarded: bool = True,

@@ -36,8 +36,7 @@ def test_a_full_history_sends_filtered_readers_no_heartbeat_per_foreign_write() 
     run = feedback_on_the_wire(clients, writer_datagrams_by_port, GOALS, ORDER, feedback_depth=10)
     for report in run.reports:
         assert report['misrouted'] == 0, report
-    before, after = run.stats_at_go['guard_heartbeats'], run.stats_after['guard_heartbeats']
-    counts = {k: after[k] - before[k] for k in after}
+    counts = run.counted('guard_heartbeats')
     assert counts['narrowed'] > 0, counts  # the history was full, and the guard narrowed it
     assert counts['piggyback_spaced'] > 0, counts  # writes within 10 ms of a HEARTBEAT sent none
     # Each feedback write goes to the plain reader too: only replies, each to its requester
@@ -67,8 +66,7 @@ def test_filtered_readers_get_their_personal_gap_in_their_data() -> None:
     run = feedback_on_the_wire(clients, writer_datagrams_by_port, GOALS, ORDER, feedback_depth=10)
     for report in run.reports:
         assert report['complete_goals'] == GOALS and report['misrouted'] == 0, report
-    before, after = run.stats_at_go['guard_heartbeats'], run.stats_after['guard_heartbeats']
-    counts = {k: after[k] - before[k] for k in after}
+    counts = run.counted('guard_heartbeats')
     assert counts['merges_dropped'] == 0 and counts['gaps_merged'] > 0, counts
     # a full history's piggyback HEARTBEAT after a merged one would repeat it
     assert counts['piggyback_merged'] > 0, counts

@@ -134,10 +134,7 @@ def test_each_enclave_gets_its_own_goals_filtered_on_the_writer(keystore: Keysto
             # (the client's response filter, which counts them, reads Fast DDS 2.14 layouts)
             assert report['responses_dropped'] == 0, (mode, report)
             assert FASTDDS3 or report['responses_passed'] > 0, (mode, report)
-    status = {k: v - run.stats_at_go['guard_status'][k] for k, v in
-              run.stats_after['guard_status'].items()}
-    replies = {k: v - run.stats_at_go['guard_replies'][k] for k, v in
-               run.stats_after['guard_replies'].items()}
+    status, replies = run.counted('guard_status'), run.counted('guard_replies')
     assert status['withheld'] > 0 and status['malformed'] == status['unknown'] == 0, status
     assert replies['withheld'] > 0 and replies['implausible'] == 0, replies
     writes, own = len(MIXED) * GOALS * ORDER, GOALS * ORDER
@@ -168,8 +165,7 @@ def test_personal_gaps_ride_in_the_data_under_protection(keystore: Keystore) -> 
     run = secured_run(keystore, clients, together=True, feedback_depth=10)
     for report in run.reports:
         assert report['complete_goals'] == goals and report['misrouted'] == 0, report
-    before, after = run.stats_at_go['guard_heartbeats'], run.stats_after['guard_heartbeats']
-    counts = {k: after[k] - before[k] for k in after}
+    counts = run.counted('guard_heartbeats')
     assert counts['gaps_merged'] > 0 and counts['merges_dropped'] == 0, counts
     # Unmerged, a datagram of its own before nearly every own sample: about twice as many.
     key, own = counted(keystore), goals * order

@@ -84,8 +84,7 @@ def assert_own_or_owed(run: WireRun, clients: Sequence[tuple[str, int, int]]) ->
     table = [[unexplained(seen, own) for own in owned] for seen in left]
     fewest = min(sum(table[port][client] for port, client in enumerate(owners))
                  for owners in itertools.permutations(range(len(owned))))
-    status = run.stats_after['guard_status']
-    owed = status['owed'] - run.stats_at_go['guard_status']['owed']
+    owed = run.counted('guard_status')['owed']
     assert fewest <= owed, (table, owed)
 
 
