@@ -278,13 +278,13 @@ def heartbeat_counts() -> dict[str, int]:
     to the reader's next sample, NACK or periodic heartbeat (``CFT_GUARD_DEFER_GAPS=0``: as Fast
     DDS). In a write that judged a reader the guard keeps and a plain one (not a status
     writer's), the piggyback HEARTBEAT goes at most every 10 ms per writer
-    (``CFT_GUARD_PIGGYBACK_MS``; ``off``: every write). In a write that judged kept readers only,
-    or whose change goes to one reader, the personal GAP and HEARTBEAT that Fast DDS sends a
-    reader with a run of filtered-out changes before its DATA, in a datagram of their own, go in
-    the DATA's datagram, and that DATA's piggyback HEARTBEAT, the same again, is left out
-    (``CFT_GUARD_MERGE_GAPS=0``: as Fast DDS). On Fast DDS 3.6 (Lyrical) the first two act, in the
-    writes of feedback writers routed to the library's clients (:func:`feedback_counts`), which
-    3.6 sends such HEARTBEATs and GAPs alike; nothing else changes there.
+    (``CFT_GUARD_PIGGYBACK_MS``; ``off``: every write). In a write whose change goes to one reader
+    (not a status writer's), the personal GAP and HEARTBEAT that Fast DDS sends a reader with a run
+    of filtered-out changes before its DATA, in a datagram of their own, go in the DATA's
+    datagram, and that DATA's piggyback HEARTBEAT, the same again, is left out
+    (``CFT_GUARD_MERGE_GAPS=0``: as Fast DDS). On Fast DDS 3.6 (Lyrical) all but the spacing act,
+    in the writes of the feedback and status writers routed to the library's clients
+    (:func:`feedback_counts`), which 3.6 sends such HEARTBEATs and GAPs alike.
     Keys:
 
     - ``narrowed``: piggyback HEARTBEATs that went to the DATA's readers only;
@@ -396,8 +396,8 @@ def status_counts() -> dict[str, int]:
     before it and had not acknowledged it when it was replaced (cft_action/native/guard/
     _guard_status.c). Plain clients get every sample. ``CFT_GUARD_STATUS=off`` turns it off. On Fast
     DDS 3.3+ (Lyrical) the status writer's public sample prefilter asks the same verdict for the
-    clients' marked status readers; there owed samples go with the write (``deferred`` and
-    ``heartbeat_periods`` stay 0) and ``kept`` counts routed status writers. Keys:
+    clients' marked status readers (owed samples deferred, the 100 ms heartbeat set through the
+    writer's QoS), and ``kept`` counts routed status writers. Keys:
 
     - ``requests``: goal requests taken, recorded with the participant that sent them;
     - ``implausible``: goal requests whose header did not name a user endpoint (not recorded);

@@ -154,7 +154,6 @@ def test_each_enclave_gets_its_own_goals_filtered_on_the_writer(keystore: Keysto
 
 
 @needs_root
-@pytest.mark.skipif(FASTDDS3, reason='the personal GAP merge reads Fast DDS 2.14 layouts')
 def test_personal_gaps_ride_in_the_data_under_protection(keystore: Keystore) -> None:
     """Two clients of the library alone on a writer of rclpy's feedback depth: each one's sample
     after the other's follows a run filtered out for it, whose GAP and HEARTBEAT the guard puts in

@@ -38,6 +38,7 @@
 #include "_guard_replies.h"
 #include "_guard_status.h"
 #include "fastdds3/_prefilter.h"
+#include "fastdds3/_rtps_types.h"
 
 // setup.py's _fastdds_layout.h says whether the layer was built; a layout header written otherwise
 // (the tests' made-up layouts) does not, and has none.
@@ -127,6 +128,7 @@ static void load_layer(void) {
   char why[512] = "";
   struct family *f = cft_family_ready(1);
   char path[4096];
+  cft_fastdds3_rtps_types_fn rtps_types = NULL;
   if (!CFT_FASTDDS3_PREFILTER) {
     snprintf(why, sizeof why, "not built (%s)", CFT_FASTDDS3_SOURCE);
   } else if (__atomic_load_n(&f->state, __ATOMIC_ACQUIRE) != CFT_GUARD_ACTIVE) {
@@ -151,9 +153,10 @@ static void load_layer(void) {
       layer.route_marked = (cft_fastdds3_route_marked_fn)dlsym(handle, CFT_FASTDDS3_ROUTE_MARKED);
       layer.marked_readers =
           (cft_fastdds3_marked_readers_fn)dlsym(handle, CFT_FASTDDS3_MARKED_READERS);
+      rtps_types = (cft_fastdds3_rtps_types_fn)dlsym(handle, CFT_FASTDDS3_RTPS_TYPES);
     }
     if (layer.route_replies == NULL || layer.route_marked == NULL ||
-        layer.marked_readers == NULL) {
+        layer.marked_readers == NULL || rtps_types == NULL) {
       snprintf(why, sizeof why, "cannot load %.250s: %.150s", path, dlerror());
       layer.route_replies = NULL, layer.route_marked = NULL;
     }
@@ -165,6 +168,7 @@ static void load_layer(void) {
   } else {
     snprintf(layer_text, sizeof layer_text, "on: %.250s, built with %.300s", path,
              CFT_FASTDDS3_SOURCE);
+    cft_fastdds3_types_loaded(rtps_types());
   }
   __atomic_store_n(&layer_state, layer_text, __ATOMIC_RELEASE);
 }
@@ -260,8 +264,10 @@ static int feedback_judge(void **state, const uint8_t *data, uint32_t length,
   (void)state;
   return cft_feedback_verdict(data, length, reader);
 }
-static const struct cft_marked_verdict feedback_verdict = {feedback_judge, NULL};
-static const struct cft_marked_verdict status_verdict = {cft_status_judge, cft_status_forget};
+static const struct cft_marked_verdict feedback_verdict = {feedback_judge, NULL,
+                                                           cft_write_passes_unjudged};
+static const struct cft_marked_verdict status_verdict = {cft_status_judge, cft_status_forget,
+                                                         cft_write_passes_unjudged};
 static const struct routed_kind {
   const char *what;
   const struct cft_marked_verdict *verdict;
@@ -269,11 +275,13 @@ static const struct routed_kind {
   bool (*is_topic)(const char *topic);
   const char *(*unroutable)(void);  // why not, or NULL
   void (*routed)(void);             // counts it
+  long (*heartbeat_ms)(void);       // its writer's heartbeat period at most (0: Fast DDS's); NULL
+  void (*heartbeat_set)(void);      // counts a writer given it
 } kinds[] = {
   {"feedback", &feedback_verdict, CFT_READER_MARK, cft_feedback_is_topic, cft_feedback_unroutable,
-   cft_feedback_writer_routed},
+   cft_feedback_writer_routed, NULL, NULL},
   {"status", &status_verdict, CFT_STATUS_READER_MARK, cft_status_is_topic, cft_status_unroutable,
-   cft_status_reader_kept},
+   cft_status_reader_kept, cft_status_heartbeat_ms, cft_status_heartbeat_set},
 };
 #define KINDS ((int)(sizeof kinds / sizeof kinds[0]))
 
@@ -291,16 +299,19 @@ static void route(const void *publisher, const char *topic, int kind) {
   if (!layer_for(true)) return;
   void *writer = layer.datawriter(rcl.publisher_rmw_handle(publisher));
   int32_t error = -1;
+  int32_t heartbeat_ms = k->heartbeat_ms != NULL ? (int32_t)k->heartbeat_ms() : 0;
   void *routing = writer != NULL ? layer.route_marked(writer, k->verdict, k->reader_mark,
-                                                      CFT_WRITER_MARK, &error)
+                                                      CFT_WRITER_MARK, &heartbeat_ms, &error)
                                  : NULL;
-  if (routing != NULL && set_routing(publisher, routing))
+  if (routing != NULL && set_routing(publisher, routing)) {
     k->routed();
-  else
+    if (heartbeat_ms > 0) k->heartbeat_set();
+  } else {
     cft_say("the %s of %.200s goes to every client: %s (%d)", k->what, topic,
             writer == NULL ? "it has no rmw_fastrtps_cpp writer"
             : routing == NULL ? "its DataWriter refused the prefilter or the mark"
                               : "too many routed publishers", (int)error);
+  }
 }
 
 // A publisher that rcl made: an action's feedback or status publisher, in a process of Fast DDS

@@ -403,3 +403,11 @@ CFT_EXPORT const char *cft_guard_reason(void) {
   if (state == CFT_GUARD_ACTIVE && active != NULL) return active;
   return "armed: no Fast DDS loaded yet; it will be interposed when it is";
 }
+
+static const struct cft_rtps_types *fastdds3_types;
+void cft_fastdds3_types_loaded(const struct cft_rtps_types *types) {
+  __atomic_store_n(&fastdds3_types, types, __ATOMIC_RELEASE);
+}
+const struct cft_rtps_types *cft_fastdds3_types(void) {
+  return __atomic_load_n(&fastdds3_types, __ATOMIC_ACQUIRE);
+}

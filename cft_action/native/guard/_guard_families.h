@@ -23,6 +23,8 @@
 #include <pthread.h>
 #include <stdbool.h>
 
+#include "fastdds3/_rtps_types.h"
+
 #ifndef CFT_EXPORT
 #define CFT_EXPORT __attribute__((visibility("default")))
 #endif
@@ -126,5 +128,11 @@ void *cft_guard_real_in_caller(void **cache, const char *name, const void *retur
 // scope, outside the global one that RTLD_NEXT searches (rcl, rmw_implementation, which the wheels
 // rename, rmw_fastrtps_cpp). Not under the loader's lock: call it outside Fast DDS's callbacks.
 void *cft_guard_loaded_symbol(const char *name, const char *prefer);
+
+// The Fast DDS 3 layer's reading of RTPS types (fastdds3/_rtps_types.h), for the parts that read a
+// change, a sequence number set or a writer on Fast DDS 3: given by _guard_endpoints.c once it
+// has loaded the layer; NULL before, and where the layer is not used.
+void cft_fastdds3_types_loaded(const struct cft_rtps_types *types);
+const struct cft_rtps_types *cft_fastdds3_types(void);
 
 #endif  // CFT_ACTION_GUARD_FAMILIES_H_

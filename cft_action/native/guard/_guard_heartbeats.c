@@ -50,13 +50,17 @@
 //    HEARTBEAT to that reader alone, in a datagram of their own (it switches the message group's
 //    sender to the reader and back, which flushes it), then the DATA: a filtered client got one per
 //    own sample that follows others' (160 B of UDP payload; in the DATA's datagram they take 64 B,
-//    as a capture on loopback showed). In a write that judged kept readers only, or whose change
-//    goes to one reader (a rate-limited subscriber's, alone on the writer), not a status
-//    writer's, the definitions of add_gap and send_heartbeat_nts_ below hold both back on the
-//    thread, and add_data (add_data_frag) of the same group, writer and change adds them before its
-//    DATA, with one HEARTBEAT after all the GAPs held: INFO_DST scopes each GAP to its reader, the
-//    HEARTBEAT goes to the DATA's readers (each GAP's among them), and the flush between sends
-//    nothing (RTPSMessageGroup::send skips a message of only its header). CFT_GUARD_MERGE_GAPS=0
+//    as a capture on loopback showed). In a write whose change goes to one reader (the write's
+//    frame counts the readers passed), not a status writer's, the definitions of add_gap and
+//    send_heartbeat_nts_ below hold both back on the thread, and add_data (add_data_frag) of the
+//    same group, writer and change adds them before its DATA, with one HEARTBEAT after the GAP:
+//    INFO_DST scopes the GAP to its reader, the HEARTBEAT and DATA go to the same reader, and the
+//    flush between sends nothing (RTPSMessageGroup::send skips a message of only its header). One
+//    reader only: Fast DDS's receivers keep an INFO_DST's destination to the datagram's end (one of
+//    GUIDPREFIX_UNKNOWN changes nothing), so that a DATA after a GAP would be lost to the other
+//    participants it goes to (a plain client beside routed ones lost all its feedback so, in a
+//    prototype on 3.6.2). A writer GUID read wrong (the DATA's change names another) stops
+//    merging, said once. CFT_GUARD_MERGE_GAPS=0
 //    turns it off. N = 16 clients x 4 goals at depth 10, 3 runs each way: the first client got 2-3
 //    gap/heartbeat datagrams instead of 403-804, and 7.2-8.5 B of feedback per own payload byte
 //    instead of 9.5-12.5; the server's CPU per message did not change measurably. A reader gets its
@@ -76,18 +80,21 @@
 // says it asked a routed reader's verdict (the prefilter runs in the write, under
 // perform_create_new_change: _guard.c opens the frame), and nowhere else: other writers, and a
 // write delivered by another thread (an asynchronous publication mode), go as Fast DDS sends them.
-// The real members are those of the library that called (cft_guard_real_in_caller). N = 16
-// clients x 4 goals, depth 10, feedback routed: 0.19x plain's bytes per client and 0.42-0.54x its
-// CPU per message, where Fast DDS's own had 1.35x and 2.1-2.3x; the personal GAP and HEARTBEAT
-// still come alone before a routed reader's DATA (part 4 reads 2.14's layouts).
+// The real members are those of the library that called (cft_guard_real_in_caller). Part 4 acts
+// there too, in the same writes, with what the layer reads of a change, a sequence number set and
+// a writer through the headers it was built with (fastdds3/_rtps_types.h); a DataWriter there
+// never sends separately (WriterAttributes::separate_sending is set for builtin writers only).
+// N = 16 clients x 4 goals, depth 10, feedback and status routed: the first client 9.15 B per own
+// payload byte (Jazzy 8.55-8.77), 1 lone GAP/HEARTBEAT datagram; with parts 1 and 2 only 0.19x
+// plain's bytes per client and 603 lone datagrams (docs/BENCHMARKS.md).
 //
 // These members are exported and called through the PLT. A call from deliver_sample_to_network is
 // told by the return address, whose symbol dladdr names once per call site; one from the
 // piggyback by send_heartbeat_piggyback_nts_, defined here too (it reaches send_heartbeat_nts_ by a
 // tail call, whose return address is its own caller's). They act only where the guard locks the
-// Fast DDS 2.14 it knows (cft_guard_knows_fastdds2); elsewhere every call goes through. Part 4
-// reads the layouts of the headers the guard was built against (_fastdds_layout.h); without them
-// its members are not defined.
+// Fast DDS 2.14 it knows (cft_guard_knows_fastdds2), or in a routed writer's write on Fast DDS 3;
+// elsewhere every call goes through. On 2.14 part 4 reads the layouts of the headers the guard
+// was built against (_fastdds_layout.h); without them it holds nothing back there.
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -103,9 +110,10 @@
 #include "_guard_families.h"
 #include "_guard_log.h"
 #include "_guard_status.h"
+#include "_guard_text.h"
 
-// Part 4 reads these layouts of the headers the guard was built against; without them (no
-// headers, or a layout header made up by a test) its members are not defined.
+// On Fast DDS 2.14 part 4 reads these layouts of the headers the guard was built against; without
+// them (no headers, or a layout header made up by a test) it holds nothing back there.
 #if CFT_LAYOUT_KNOWN && defined(CC_SEQUENCE) && defined(CC_WRITER_GUID) && defined(SNS_SIZE) && \
     defined(SNS_BASE) && defined(SW_GUID) && defined(SW_SEPARATE_SENDING) &&                   \
     defined(CFT_LAYOUT_HAVE_SECURITY)
@@ -206,8 +214,7 @@ void cft_send_heartbeat_piggyback_nts2(void *self, void *group, void *locator_se
   in_piggyback = outer;
 }
 
-// Fast DDS 3.4.2+'s, with two parameters. A HEARTBEAT it widens goes through select_all_readers_nts
-// (below): nothing else of the piggyback's is held back on that family.
+// Fast DDS 3.4.2+'s, with two parameters.
 typedef void (*piggyback3_fn)(void *self, void *group, void *locator_selector);
 static void *real_piggyback3;
 
@@ -221,7 +228,6 @@ void cft_send_heartbeat_piggyback_nts3(void *self, void *group, void *locator_se
   in_piggyback = true;
   real(self, group, locator_selector);
   in_piggyback = outer;
-  widened_now = false;  // read by Fast DDS 2.14's send_heartbeat_nts_ only
 }
 
 // ---- the switches --------------------------------------------------------------------------
@@ -390,71 +396,125 @@ static struct writer_slot piggyback_slots[WRITER_SLOTS];
 typedef void (*send_heartbeat_fn)(void *self, size_t readers, void *group, bool final,
                                   bool liveliness);
 static void *real_send_heartbeat;
-#if MERGE_LAYOUT_KNOWN
+// Part 4's, below.
 static bool heartbeat_merged(void *self, void *group, bool final, bool liveliness,
-                             uintptr_t return_address);
-#endif
-
-#if MERGE_LAYOUT_KNOWN
-static bool heartbeat_merged(void *self, void *group, bool final, bool liveliness,
-                             uintptr_t return_address);
+                             send_heartbeat_fn real, const void *return_address, bool separate);
 static bool repeats_merged(void *self, void *group);
-#endif
+static bool separate_sending(const void *writer);
 
 CFT_EXPORT void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final,
                                         bool liveliness) __asm__(SEND_HEARTBEAT);
 void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final,
                              bool liveliness) {
-#if MERGE_LAYOUT_KNOWN
-  if (heartbeat_merged(self, group, final, liveliness, (uintptr_t)__builtin_return_address(0)))
+  send_heartbeat_fn real = (send_heartbeat_fn)cft_guard_real(&real_send_heartbeat,
+                                                             FASTDDS2_SONAME, SEND_HEARTBEAT);
+  if (real == NULL) return;  // unreachable: only that Fast DDS calls this member
+  if (heartbeat_merged(self, group, final, liveliness, real, __builtin_return_address(0),
+                       separate_sending(self)))
     return;
-#endif
   long interval = piggyback_ns();
   bool widened = widened_now;
   widened_now = false;
-#if MERGE_LAYOUT_KNOWN
   if (!widened && in_piggyback && repeats_merged(self, group)) {
     count(PIGGYBACK_MERGED);
     return;
   }
-#endif
   if (interval > 0 && !widened && in_piggyback &&
       cft_write_judged_now() == (CFT_KEPT_READER | CFT_OTHER_READER) && !cft_status_write_now() &&
       !due(piggyback_slots, (uintptr_t)self, interval)) {
     count(PIGGYBACK_SPACED);
     return;
   }
-  send_heartbeat_fn real = (send_heartbeat_fn)cft_guard_real(&real_send_heartbeat,
-                                                             FASTDDS2_SONAME, SEND_HEARTBEAT);
-  if (real != NULL) real(self, readers, group, final, liveliness);  // else unreachable
+  real(self, readers, group, final, liveliness);
+}
+
+// Fast DDS 3.4.2+'s: part 4 only (part 3 acts on Fast DDS 2.14).
+#define SEND_HEARTBEAT3 SW3_PREFIX "19send_heartbeat_nts_EmRNS1_16RTPSMessageGroupEbb"
+static void *real_send_heartbeat3;
+
+CFT_EXPORT void cft_send_heartbeat_nts3(void *self, size_t readers, void *group, bool final,
+                                        bool liveliness) __asm__(SEND_HEARTBEAT3);
+void cft_send_heartbeat_nts3(void *self, size_t readers, void *group, bool final,
+                             bool liveliness) {
+  const void *caller = __builtin_return_address(0);
+  send_heartbeat_fn real =
+      (send_heartbeat_fn)cft_guard_real_in_caller(&real_send_heartbeat3, SEND_HEARTBEAT3, caller);
+  if (real == NULL) return;  // unreachable: only that Fast DDS calls this member
+  // Fast DDS 3's DataWriters never send separately (WriterAttributes::separate_sending is set
+  // for builtin writers only: v3.6.2's EDPServer, PDPServer, SecurityManager).
+  if (heartbeat_merged(self, group, final, liveliness, real, caller, false)) return;
+  bool widened = widened_now;
+  widened_now = false;
+  if (!widened && in_piggyback && repeats_merged(self, group)) {
+    count(PIGGYBACK_MERGED);
+    return;
+  }
+  real(self, readers, group, final, liveliness);
 }
 
 // ---- 4. the personal GAP and HEARTBEAT, in the DATA's datagram (CFT_GUARD_MERGE_GAPS) ----------
-// Without the headers' layouts nothing is held back: these members are then not interposed.
+// What this part reads of a change, a sequence number set and a writer: on Fast DDS 2.14 the
+// layouts of the headers the guard was built against (without them nothing is held back there),
+// on Fast DDS 3 the layer's reading, through the headers it was built with (fastdds3/_rtps_types.h;
+// NULL until the layer is loaded, and where it is not).
+#define GUID_SIZE CFT_RTPS_GUID_SIZE
+typedef bool (*add_gap_fn)(void *group, const void *seq, const void *set, const void *reader);
+
 #if MERGE_LAYOUT_KNOWN
-#define GROUP_PREFIX "_ZN8eprosima8fastrtps4rtps16RTPSMessageGroup"
-#define ADD_GAP                                                                                 \
-  GROUP_PREFIX "7add_gapERKNS1_16SequenceNumber_tERKNS0_11BitmapRangeIS3_NS1_18SequenceNumberDiff" \
-               "ELj256EEERKNS1_6GUID_tE"
-#define ADD_DATA GROUP_PREFIX "8add_dataERKNS1_13CacheChange_tEb"
-#define ADD_DATA_FRAG GROUP_PREFIX "13add_data_fragERKNS1_13CacheChange_tEjb"
+_Static_assert(SNS_SIZE <= CFT_RTPS_SET_MAX, "a held GAP copies SequenceNumberSet_t");
+static void set_base2(const void *set, uint8_t sequence[CFT_SEQUENCE_SIZE]) {
+  memcpy(sequence, (const uint8_t *)set + SNS_BASE, CFT_SEQUENCE_SIZE);
+}
+static void change_ids2(const void *change, uint8_t sequence[CFT_SEQUENCE_SIZE],
+                        uint8_t writer_guid[GUID_SIZE]) {
+  memcpy(sequence, (const uint8_t *)change + CC_SEQUENCE, CFT_SEQUENCE_SIZE);
+  memcpy(writer_guid, (const uint8_t *)change + CC_WRITER_GUID, GUID_SIZE);
+}
+static void writer_guid2(const void *writer, uint8_t guid[GUID_SIZE]) {
+  memcpy(guid, (const uint8_t *)writer + SW_GUID, GUID_SIZE);
+}
+static const struct cft_rtps_types types2 = {SNS_SIZE, set_base2, change_ids2, writer_guid2};
+#endif
+
+// Set when a GAP held back met its DATA with another writer's GUID than its HEARTBEAT's writer
+// had: the reading of one of them is wrong (or an exception left a GAP of another writer): from
+// then on nothing is held back, said once.
+static int merge_broken;
+
+// Fast DDS 2.14's reading, where CFT_GUARD_MERGE_GAPS is on (unless "off" or "0"), the headers'
+// layouts are known and the guard knows that Fast DDS; else NULL.
+static const struct cft_rtps_types *merge_types2(void) {
+#if MERGE_LAYOUT_KNOWN
+  static int on = -1;  // -1: not read yet
+  if (cft_guard_part_on(&on, "CFT_GUARD_MERGE_GAPS", true) &&
+      !__atomic_load_n(&merge_broken, __ATOMIC_RELAXED))
+    return &types2;
+#endif
+  return NULL;
+}
+
+// Fast DDS 3's, where CFT_GUARD_MERGE_GAPS is on and the layer is loaded; else NULL.
+static const struct cft_rtps_types *merge_types3(void) {
+  static int off = -1;  // -1: not read yet
+  int o = __atomic_load_n(&off, __ATOMIC_RELAXED);
+  if (o < 0) __atomic_store_n(&off, o = cft_env_off("CFT_GUARD_MERGE_GAPS"), __ATOMIC_RELAXED);
+  if (o || __atomic_load_n(&merge_broken, __ATOMIC_RELAXED)) return NULL;
+  return cft_fastdds3_types();
+}
+
+#if MERGE_LAYOUT_KNOWN
 // SecurityManager::cancel_init(), exported only by a Fast DDS built with SECURITY=ON, which
 // moves RTPSWriter's members (m_separateSendingEnabled) from the headers' offsets.
 #define SECURITY_ONLY_SYMBOL "_ZN8eprosima8fastrtps4rtps8security15SecurityManager11cancel_initEv"
-#define GUID_SIZE 16
+#endif
 
-// CFT_GUARD_MERGE_GAPS: on unless "off" or "0", and only where the guard knows the Fast DDS.
-static bool merge_on(void) {
-  static int on = -1;  // -1: not read yet
-  return cft_guard_part_on(&on, "CFT_GUARD_MERGE_GAPS", true);
-}
-
-// Whether `writer` sends each reader's DATA in a datagram of its own (m_separateSendingEnabled).
-// In Fast DDS 2.14 only builtin writers do (the discovery server's, security's), which write in no
-// frame that judged kept readers. The flag is read where its offset is known: the headers', when
-// the loaded library's HAVE_SECURITY, which moves it, is theirs (apt's 2.14.6 beside the wheels'
-// headers is not).
+// Whether a Fast DDS 2.14 `writer` sends each reader's DATA in a datagram of its own
+// (m_separateSendingEnabled). In Fast DDS 2.14 only builtin writers do (the discovery server's,
+// security's), which write in no frame that judged kept readers. The flag is read where its offset
+// is known: the headers', when the loaded library's HAVE_SECURITY, which moves it, is theirs (apt's
+// 2.14.6 beside the wheels' headers is not).
 static bool separate_sending(const void *writer) {
+#if MERGE_LAYOUT_KNOWN
   static int offset_known = -1;  // -1: not decided yet
   static void *security_symbol;
   int known = __atomic_load_n(&offset_known, __ATOMIC_RELAXED);
@@ -467,6 +527,10 @@ static bool separate_sending(const void *writer) {
   bool separate = false;
   if (known) memcpy(&separate, (const uint8_t *)writer + SW_SEPARATE_SENDING, sizeof separate);
   return separate;
+#else
+  (void)writer;
+  return false;
+#endif
 }
 
 // A personal GAP held back on this thread, with the HEARTBEAT that followed it. Those held share
@@ -475,13 +539,17 @@ static bool separate_sending(const void *writer) {
 // GAP goes at once, as in Fast DDS.
 #define HELD 4
 struct held {
-  void *group;                    // the RTPSMessageGroup it was added to
-  void *writer;                   // the StatefulWriter whose HEARTBEAT followed; NULL: none yet
-  uint8_t writer_guid[GUID_SIZE]; // its GUID, to tell its DATA
-  bool final, liveliness;         // that send_heartbeat_nts_'s arguments
-  uint8_t seq[CFT_SEQUENCE_SIZE]; // add_gap's arguments: the first sequence number of the run,
-  uint8_t set[SNS_SIZE];          // the set, whose base is the change of the DATA that follows,
-  uint8_t reader[GUID_SIZE];      // and the reader
+  void *group;                         // the RTPSMessageGroup it was added to
+  const struct cft_rtps_types *types;  // its family's reading
+  add_gap_fn add_gap;                  // the real member Fast DDS called
+  void *writer;                        // the StatefulWriter whose HEARTBEAT followed; NULL: none yet
+  send_heartbeat_fn send_heartbeat;    // the real member it called
+  uint8_t writer_guid[GUID_SIZE];      // its GUID, to tell its DATA
+  bool final, liveliness;              // that send_heartbeat_nts_'s arguments
+  uint8_t seq[CFT_SEQUENCE_SIZE];      // add_gap's arguments: the first sequence number of the run,
+  uint8_t set[CFT_RTPS_SET_MAX];       // the set, whose base is the change of the DATA that follows
+  uint8_t base[CFT_SEQUENCE_SIZE];     // (that base),
+  uint8_t reader[GUID_SIZE];           // and the reader
 };
 static __thread struct held held[HELD];
 static __thread int held_count;
@@ -490,95 +558,142 @@ static __thread struct held *awaiting_heartbeat;
 // The group and writer of the HEARTBEAT that merge_held added before this DATA, if it added one.
 static __thread void *merged_group, *merged_writer;
 
-typedef bool (*add_gap_fn)(void *group, const void *seq, const void *set, const void *reader);
-static void *real_add_gap;
-
-static add_gap_fn add_gap(void) {
-  return (add_gap_fn)cft_guard_real(&real_add_gap, FASTDDS2_SONAME, ADD_GAP);
-}
-
-static send_heartbeat_fn send_heartbeat(void) {
-  return (send_heartbeat_fn)cft_guard_real(&real_send_heartbeat, FASTDDS2_SONAME, SEND_HEARTBEAT);
-}
-
 static void drop_held(void) {
   for (int i = 0; i < held_count; i++) count(MERGES_DROPPED);
   held_count = 0;
   awaiting_heartbeat = NULL;
 }
 
+// Whether add_gap's GAP is held back (`types`: the family's reading, NULL when nothing may be held
+// back now; `real`: the member).
+static bool gap_held(const struct cft_rtps_types *types, add_gap_fn real,
+                     const void *return_address, void *group, const void *seq, const void *set,
+                     const void *reader) {
+  if (types == NULL || real == NULL || caller_of((uintptr_t)return_address) != DELIVER)
+    return false;
+  uint8_t base[CFT_SEQUENCE_SIZE];
+  types->set_base(set, base);
+  if (held_count > 0 && (held[0].group != group || memcmp(held[0].base, base, sizeof base) != 0))
+    drop_held();
+  if (held_count == HELD) return false;
+  struct held *h = &held[held_count++];
+  h->group = group;
+  h->types = types;
+  h->add_gap = real;
+  h->writer = NULL;
+  memcpy(h->seq, seq, sizeof h->seq);
+  memcpy(h->set, set, types->set_size);
+  memcpy(h->base, base, sizeof h->base);
+  memcpy(h->reader, reader, sizeof h->reader);
+  awaiting_heartbeat = h;
+  return true;
+}
+
+#define GROUP_PREFIX "_ZN8eprosima8fastrtps4rtps16RTPSMessageGroup"
+#define ADD_GAP                                                                                 \
+  GROUP_PREFIX "7add_gapERKNS1_16SequenceNumber_tERKNS0_11BitmapRangeIS3_NS1_18SequenceNumberDiff" \
+               "ELj256EEERKNS1_6GUID_tE"
+#define ADD_DATA GROUP_PREFIX "8add_dataERKNS1_13CacheChange_tEb"
+#define ADD_DATA_FRAG GROUP_PREFIX "13add_data_fragERKNS1_13CacheChange_tEjb"
+#define GROUP3_PREFIX "_ZN8eprosima7fastdds4rtps16RTPSMessageGroup"
+#define ADD_GAP3                                                                                 \
+  GROUP3_PREFIX "7add_gapERKNS1_16SequenceNumber_tERKNS0_11BitmapRangeIS3_NS1_18SequenceNumberDiff" \
+                "ELj256EEERKNS1_6GUID_tE"
+#define ADD_DATA3 GROUP3_PREFIX "8add_dataERNS1_13CacheChange_tEb"
+#define ADD_DATA_FRAG3 GROUP3_PREFIX "13add_data_fragERNS1_13CacheChange_tEjb"
+
+// Whether the write on this thread may merge its personal GAPs: its change goes to one reader (the
+// frame counts the readers each verdict passed; on Fast DDS 3 a routed writer's prefilter counts
+// the readers it passes unasked), and it is not a status writer's. Fast DDS's receivers keep the
+// destination of an INFO_DST to the end of the datagram (one of GUIDPREFIX_UNKNOWN changes
+// nothing: MessageReceiver::proc_Submsg_InfoDST, v2.14.6 and v3.6.2), so that a DATA after a GAP
+// of one participant's reader would reach that participant only.
+static bool merges_now(void) { return cft_write_passed_now() == 1 && !cft_status_write_now(); }
+
+static void *real_add_gap;
+
 CFT_EXPORT bool cft_add_gap2(void *group, const void *seq, const void *set, const void *reader)
     __asm__(ADD_GAP);
 bool cft_add_gap2(void *group, const void *seq, const void *set, const void *reader) {
-  if (merge_on() && caller_of((uintptr_t)__builtin_return_address(0)) == DELIVER &&
-      (cft_write_judged_now() == CFT_KEPT_READER || cft_write_passed_now() == 1) &&
-      !cft_status_write_now()) {
-    if (held_count > 0 && (held[0].group != group ||
-                           memcmp(held[0].set + SNS_BASE, (const uint8_t *)set + SNS_BASE,
-                                  CFT_SEQUENCE_SIZE) != 0))
-      drop_held();
-    if (held_count < HELD) {
-      struct held *h = &held[held_count++];
-      h->group = group;
-      h->writer = NULL;
-      memcpy(h->seq, seq, sizeof h->seq);
-      memcpy(h->set, set, sizeof h->set);
-      memcpy(h->reader, reader, sizeof h->reader);
-      awaiting_heartbeat = h;
-      return true;
-    }
-  }
-  add_gap_fn real = add_gap();
+  add_gap_fn real = (add_gap_fn)cft_guard_real(&real_add_gap, FASTDDS2_SONAME, ADD_GAP);
+  if (gap_held(merges_now() ? merge_types2() : NULL, real, __builtin_return_address(0), group,
+               seq, set, reader))
+    return true;
+  return real != NULL && real(group, seq, set, reader);  // else unreachable: Fast DDS called us
+}
+
+static void *real_add_gap3;
+
+CFT_EXPORT bool cft_add_gap3(void *group, const void *seq, const void *set, const void *reader)
+    __asm__(ADD_GAP3);
+bool cft_add_gap3(void *group, const void *seq, const void *set, const void *reader) {
+  const void *caller = __builtin_return_address(0);
+  add_gap_fn real = (add_gap_fn)cft_guard_real_in_caller(&real_add_gap3, ADD_GAP3, caller);
+  if (gap_held(merges_now() ? merge_types3() : NULL, real, caller, group, seq, set, reader))
+    return true;
   return real != NULL && real(group, seq, set, reader);  // else unreachable: Fast DDS called us
 }
 
 // Whether the HEARTBEAT of a send_heartbeat_nts_ returning to `return_address` is that of a GAP
-// held back, and held back with it.
+// held back, and held back with it (`separate`: the writer sends each reader's DATA apart).
 static bool heartbeat_merged(void *self, void *group, bool final, bool liveliness,
-                             uintptr_t return_address) {
+                             send_heartbeat_fn real, const void *return_address, bool separate) {
   struct held *h = awaiting_heartbeat;
   awaiting_heartbeat = NULL;
-  if (h == NULL || h->group != group || in_piggyback || caller_of(return_address) != DELIVER)
+  if (h == NULL || h->group != group || in_piggyback ||
+      caller_of((uintptr_t)return_address) != DELIVER)
     return false;
-  if (separate_sending(self)) {
+  if (separate) {
     // Each reader's DATA goes in a datagram of its own, maybe not this reader's: the GAP goes
     // now, in this reader's, and the HEARTBEAT after it, as Fast DDS sends them.
     held_count--;
-    add_gap()(group, h->seq, h->set, h->reader);  // not NULL: Fast DDS called it
+    h->add_gap(group, h->seq, h->set, h->reader);
     return false;
   }
   h->writer = self;
-  memcpy(h->writer_guid, (const uint8_t *)self + SW_GUID, sizeof h->writer_guid);
+  h->send_heartbeat = real;
+  h->types->writer_guid(self, h->writer_guid);
   h->final = final;
   h->liveliness = liveliness;
   return true;
 }
 
+// Says once that merging stopped, and stops it.
+static void merge_stops(void) {
+  if (!__atomic_exchange_n(&merge_broken, 1, __ATOMIC_RELAXED))
+    cft_say("a personal GAP held back met its DATA with a writer GUID other than its writer's: "
+            "GAPs go in datagrams of their own from now on, as Fast DDS sends them");
+}
+
 // Before a DATA (or DATA_FRAG) of `change` in `group`: the GAPs held back for it, then one
 // HEARTBEAT of its writer (it goes to all the DATA's readers, each GAP's among them). Those held
 // for another group or change are stale (an exception, or no locator, left them) and dropped.
-static void merge_held(void *group, const uint8_t *change) {
+static void merge_held(void *group, const void *change) {
   struct held merged[HELD];
   int n = held_count;
   memcpy(merged, held, (size_t)n * sizeof merged[0]);
   held_count = 0;  // before the real members run: they may throw
   awaiting_heartbeat = NULL;
+  uint8_t sequence[CFT_SEQUENCE_SIZE], writer_guid[GUID_SIZE];
+  merged[0].types->change_ids(change, sequence, writer_guid);
   const struct held *last = NULL;
-  add_gap_fn real = add_gap();  // not NULL: Fast DDS called it
   for (int i = 0; i < n; i++) {
     const struct held *h = &merged[i];
-    if (h->group != group || h->writer == NULL ||
-        memcmp(h->writer_guid, change + CC_WRITER_GUID, GUID_SIZE) != 0 ||
-        memcmp(h->set + SNS_BASE, change + CC_SEQUENCE, CFT_SEQUENCE_SIZE) != 0) {
+    if (h->group != group || h->writer == NULL || memcmp(h->base, sequence, sizeof sequence) != 0) {
       count(MERGES_DROPPED);
       continue;
     }
+    if (memcmp(h->writer_guid, writer_guid, GUID_SIZE) != 0) {
+      count(MERGES_DROPPED);
+      merge_stops();
+      continue;
+    }
     count(GAPS_MERGED);
-    real(group, h->seq, h->set, h->reader);
+    h->add_gap(group, h->seq, h->set, h->reader);
     last = h;
   }
   if (last != NULL) {
-    send_heartbeat()(last->writer, 1, group, last->final, last->liveliness);
+    last->send_heartbeat(last->writer, 1, group, last->final, last->liveliness);
     merged_group = group;
     merged_writer = last->writer;
   }
@@ -601,7 +716,9 @@ static void before_data(void *group, const void *change) {
 }
 
 typedef bool (*add_data_fn)(void *group, const void *change, bool expects_inline_qos);
-static void *real_add_data;
+typedef bool (*add_data_frag_fn)(void *group, const void *change, uint32_t fragment,
+                                 bool expects_inline_qos);
+static void *real_add_data, *real_add_data3, *real_add_data_frag, *real_add_data_frag3;
 
 CFT_EXPORT bool cft_add_data2(void *group, const void *change, bool expects_inline_qos)
     __asm__(ADD_DATA);
@@ -611,9 +728,14 @@ bool cft_add_data2(void *group, const void *change, bool expects_inline_qos) {
   return real != NULL && real(group, change, expects_inline_qos);  // else unreachable
 }
 
-typedef bool (*add_data_frag_fn)(void *group, const void *change, uint32_t fragment,
-                                 bool expects_inline_qos);
-static void *real_add_data_frag;
+CFT_EXPORT bool cft_add_data3(void *group, const void *change, bool expects_inline_qos)
+    __asm__(ADD_DATA3);
+bool cft_add_data3(void *group, const void *change, bool expects_inline_qos) {
+  add_data_fn real = (add_data_fn)cft_guard_real_in_caller(&real_add_data3, ADD_DATA3,
+                                                           __builtin_return_address(0));
+  before_data(group, change);
+  return real != NULL && real(group, change, expects_inline_qos);  // else unreachable
+}
 
 CFT_EXPORT bool cft_add_data_frag2(void *group, const void *change, uint32_t fragment,
                                    bool expects_inline_qos) __asm__(ADD_DATA_FRAG);
@@ -624,7 +746,16 @@ bool cft_add_data_frag2(void *group, const void *change, uint32_t fragment,
       (add_data_frag_fn)cft_guard_real(&real_add_data_frag, FASTDDS2_SONAME, ADD_DATA_FRAG);
   return real != NULL && real(group, change, fragment, expects_inline_qos);  // else unreachable
 }
-#endif
+
+CFT_EXPORT bool cft_add_data_frag3(void *group, const void *change, uint32_t fragment,
+                                   bool expects_inline_qos) __asm__(ADD_DATA_FRAG3);
+bool cft_add_data_frag3(void *group, const void *change, uint32_t fragment,
+                        bool expects_inline_qos) {
+  add_data_frag_fn real = (add_data_frag_fn)cft_guard_real_in_caller(
+      &real_add_data_frag3, ADD_DATA_FRAG3, __builtin_return_address(0));
+  before_data(group, change);
+  return real != NULL && real(group, change, fragment, expects_inline_qos);  // else unreachable
+}
 
 // 0: piggyback HEARTBEATs kept to the DATA's readers; 1: let through to all readers;
 // 2: per-write GAPs left for later; 3: GAPs of the other kinds; 4: piggyback HEARTBEATs left out

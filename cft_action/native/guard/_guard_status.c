@@ -78,9 +78,12 @@
 // asks cft_status_judge for each marked reader, with the record the layer keeps for it. The same
 // write order holds there (v3.6.2: prepare_change removes the previous change before
 // unsent_change_added_to_history asks ReaderProxy::rtps_is_relevant, whose
-// DataWriterImpl::is_relevant asks the prefilter), so change_has_been_removed and rtps_is_relevant
-// are defined under 3.x's names too, and owed samples are told alike. They are sent with the
-// write: deferring them and the 100 ms heartbeat read 2.14's layouts.
+// DataWriterImpl::is_relevant asks the prefilter), so change_has_been_removed, rtps_is_relevant
+// and change_is_unsent are defined under 3.x's names too, and owed samples are told and deferred
+// alike: the change's sequence number as the guard's Fast DDS 3 layer reads it (fastdds3/
+// _rtps_types.h), ChangeForReaderStatus_t's UNACKNOWLEDGED the value it has from 3.3 to 3.6.2
+// (UNACKNOWLEDGED3). The 100 ms heartbeat is set through public API there: _guard_endpoints.c has
+// the layer shorten the status writer's DataWriterQos heartbeat period when it routes it.
 //
 // Soundness rules:
 // - Only where _guard.c locks the Fast DDS 2.14 it knows, with its layouts and rmw's from headers;
@@ -90,7 +93,8 @@
 // - The interposed Fast DDS members always call the real ones, found in the library that called
 //   them.
 // - CFT_GUARD_STATUS=off (or 0) turns this file off: every status sample goes to every reader.
-// - An owed sample is deferred only where the headers gave CC_SEQUENCE and CFR_UNACKNOWLEDGED.
+// - An owed sample is deferred only where the headers gave CC_SEQUENCE and CFR_UNACKNOWLEDGED, or
+//   on Fast DDS 3 where the layer reads changes (it is loaded: the writer is routed).
 
 #define _GNU_SOURCE
 #include <dlfcn.h>
@@ -133,6 +137,13 @@
   "_ZNK8eprosima7fastdds4rtps11ReaderProxy15change_is_ackedERKNS1_16SequenceNumber_tE"
 #define RTPS_IS_RELEVANT3 \
   "_ZNK8eprosima7fastdds4rtps11ReaderProxy16rtps_is_relevantEPNS1_13CacheChange_tE"
+#define CHANGE_IS_UNSENT3 "_ZN8eprosima7fastdds4rtps11" CHANGE_IS_UNSENT_TAIL
+#define FROM_UNSENT3 \
+  "_ZN8eprosima7fastdds4rtps11ReaderProxy21from_unsent_to_statusERKNS1_16SequenceNumber_tE" \
+  "NS1_23ChangeForReaderStatus_tEbb"
+// ChangeForReaderStatus_t::UNACKNOWLEDGED of Fast DDS 3.3 to 3.6.2 (src/cpp/rtps/writer/
+// ChangeForReader.hpp, not installed): UNSENT 0, REQUESTED 1, UNACKNOWLEDGED 2.
+#define UNACKNOWLEDGED3 2
 
 #define STATUS_TOPIC_PREFIX "rt/"
 #define STATUS_TOPIC_SUFFIX "/_action/status"
@@ -190,13 +201,18 @@ static bool status_on(void) {
   return cft_guard_part_on(&on, "CFT_GUARD_STATUS", STATUS_LAYOUT_KNOWN);
 }
 
-#if DEFER_LAYOUT_KNOWN
-// CFT_GUARD_DEFER_OWED: on unless "off" or "0", where the status filter is on.
-static bool defer_on(void) {
-  static int on = -1;
-  return cft_guard_part_on(&on, "CFT_GUARD_DEFER_OWED", 1) && status_on();
+// CFT_GUARD_DEFER_OWED: on unless "off" or "0", where the status filter is on (Fast DDS 2.14:
+// `fam` 0) or the Fast DDS 3 layer reads changes (1).
+static bool defer_on(int fam) {
+  if (fam == 0) {
+    static int on = -1;
+    return DEFER_LAYOUT_KNOWN && cft_guard_part_on(&on, "CFT_GUARD_DEFER_OWED", 1) && status_on();
+  }
+  static int off = -1;  // -1: not read yet
+  int o = __atomic_load_n(&off, __ATOMIC_RELAXED);
+  if (o < 0) __atomic_store_n(&off, o = cft_env_off("CFT_GUARD_DEFER_OWED"), __ATOMIC_RELAXED);
+  return !o && cft_fastdds3_types() != NULL;
 }
-#endif
 
 bool cft_status_keeps(const char *topic, const char *type) {
   return topic != NULL && type != NULL && strncmp(topic, STATUS_TOPIC_PREFIX, 3) == 0 &&
@@ -245,6 +261,7 @@ const struct cft_filter_grammar cft_guard_status_grammar = {status_compile, NULL
 static __thread struct cft_status_frame *frame;  // the innermost write on this thread
 static __thread const void *asking;              // the ReaderProxy whose rtps_is_relevant runs
 static __thread const uint8_t *asked_change;     // the CacheChange_t it asks about
+static __thread int asked_family;                // of which Fast DDS family (0: 2.14, 1: 3.x)
 static bool status_readers;  // a status reader was kept: only then are removals looked at
 
 void cft_status_frame_open(struct cft_status_frame *f) {
@@ -274,6 +291,11 @@ bool cft_write_passes(bool passed) {
 }
 
 int cft_write_passed_now(void) { return frame != NULL ? frame->passed : 0; }
+
+void cft_write_passes_unjudged(void) {
+  cft_write_judged(CFT_OTHER_READER);
+  cft_write_passes(true);
+}
 
 static bool owed(void) {
   if (frame == NULL || asking == NULL) return false;
@@ -322,10 +344,12 @@ void cft_change_has_been_removed3(void *self, const void *sequence) {
 struct asking_state {
   const void *reader;
   const uint8_t *change;
+  int family;
 };
 static void restore_asking(const struct asking_state *saved) {
   asking = saved->reader;
   asked_change = saved->change;
+  asked_family = saved->family;
 }
 
 // ReaderProxy::rtps_is_relevant of family `fam`, called from `caller`.
@@ -333,9 +357,11 @@ static bool is_relevant(int fam, const void *self, void *change, const void *cal
   relevant_fn real = (relevant_fn)cft_guard_real_in_caller(&real_relevant[fam],
                                                            relevant_name[fam], caller);
   if (real == NULL) return true;  // deliver, as to a reader without a filter
-  const struct asking_state saved __attribute__((cleanup(restore_asking))) = {asking, asked_change};
+  const struct asking_state saved __attribute__((cleanup(restore_asking))) = {
+      asking, asked_change, asked_family};
   asking = self;
   asked_change = change;
+  asked_family = fam;
   return real(self, change);
 }
 
@@ -349,21 +375,33 @@ bool cft_rtps_is_relevant3(const void *self, void *change) {
   return is_relevant(1, self, change, __builtin_return_address(0));
 }
 
+// The sequence number of the change asked about: 2.14's at the headers' offset, 3.x's as the
+// layer reads it.
+static void asked_sequence(uint8_t sequence[CFT_SEQUENCE_SIZE]) {
+#if DEFER_LAYOUT_KNOWN
+  if (asked_family == 0) {
+    memcpy(sequence, asked_change + CC_SEQUENCE, CFT_SEQUENCE_SIZE);
+    return;
+  }
+#endif
+  uint8_t writer_guid[CFT_RTPS_GUID_SIZE];
+  cft_fastdds3_types()->change_ids(asked_change, sequence, writer_guid);  // defer_on: not NULL
+}
+
 // An owed change for the reader asking: relevant, and not sent with this write.
 static void defer(void) {
-#if DEFER_LAYOUT_KNOWN
-  if (frame == NULL || asking == NULL || asked_change == NULL || !defer_on()) return;
+  if (frame == NULL || asking == NULL || asked_change == NULL || !defer_on(asked_family)) return;
+  uint8_t sequence[CFT_SEQUENCE_SIZE];
+  asked_sequence(sequence);
   if (frame->deferred_count == 0) {
-    memcpy(frame->sequence, asked_change + CC_SEQUENCE, CFT_SEQUENCE_SIZE);
-  } else if (memcmp(frame->sequence, asked_change + CC_SEQUENCE, CFT_SEQUENCE_SIZE) != 0) {
+    memcpy(frame->sequence, sequence, CFT_SEQUENCE_SIZE);
+  } else if (memcmp(frame->sequence, sequence, CFT_SEQUENCE_SIZE) != 0) {
     return;  // another change in the same write: not expected; it is sent
   }
   if (frame->deferred_count < CFT_STATUS_FRAME_READERS)
     frame->deferred[frame->deferred_count++] = asking;
-#endif
 }
 
-#if DEFER_LAYOUT_KNOWN
 static bool deferred(const void *reader, const void *sequence) {
   if (frame == NULL || frame->deferred_count == 0 ||
       memcmp(frame->sequence, sequence, CFT_SEQUENCE_SIZE) != 0)
@@ -372,22 +410,27 @@ static bool deferred(const void *reader, const void *sequence) {
     if (frame->deferred[i] == reader) return true;
   return false;
 }
-#endif
 
 typedef bool (*unsent_fn)(void *self, const void *sequence, uint32_t *next_fragment, void *gap,
                           const void *min_sequence, bool *reactivate_heartbeat);
 typedef void (*from_unsent_fn)(void *self, const void *sequence, int status, bool restart_nack,
                                bool delivered);
-static void *real_unsent, *real_unsent_const;
+static void *real_unsent, *real_unsent_const, *real_unsent3;
+// Each family's from_unsent_to_status, and the value of its ChangeForReaderStatus_t's
+// UNACKNOWLEDGED (-1: not known).
+static void *real_from_unsent[2];
+static const char *const from_unsent_name[2] = {FROM_UNSENT, FROM_UNSENT3};
 #if DEFER_LAYOUT_KNOWN
-static void *real_from_unsent;
+static const int unacknowledged[2] = {CFR_UNACKNOWLEDGED, UNACKNOWLEDGED3};
+#else
+static const int unacknowledged[2] = {-1, UNACKNOWLEDGED3};
 #endif
 
-// ReaderProxy::change_is_unsent, for each reader, as the writer delivers a change: false for a
-// reader it is deferred for, whose change becomes UNACKNOWLEDGED. Only for one the real member
-// found unsent and not yet delivered to a reliable reader (it raised `reactivate` for it).
-static bool change_is_unsent(void **cache, const char *name, const void *caller, void *self,
-                             const void *sequence, uint32_t *next_fragment, void *gap,
+// ReaderProxy::change_is_unsent of family `fam`, for each reader, as the writer delivers a change:
+// false for a reader it is deferred for, whose change becomes UNACKNOWLEDGED. Only for one the
+// real member found unsent and not yet delivered to a reliable reader (it raised `reactivate`).
+static bool change_is_unsent(int fam, void **cache, const char *name, const void *caller,
+                             void *self, const void *sequence, uint32_t *next_fragment, void *gap,
                              const void *min_sequence, bool *reactivate) {
   unsent_fn real = (unsent_fn)cft_guard_real_in_caller(cache, name, caller);
   if (real == NULL) {
@@ -397,16 +440,15 @@ static bool change_is_unsent(void **cache, const char *name, const void *caller,
   bool reliable_first = false;
   bool unsent = real(self, sequence, next_fragment, gap, min_sequence, &reliable_first);
   *reactivate |= reliable_first;
-#if DEFER_LAYOUT_KNOWN
-  if (unsent && reliable_first && deferred(self, sequence)) {
-    from_unsent_fn to = (from_unsent_fn)cft_guard_real_in_caller(&real_from_unsent, FROM_UNSENT, caller);
+  if (unsent && reliable_first && unacknowledged[fam] >= 0 && deferred(self, sequence)) {
+    from_unsent_fn to = (from_unsent_fn)cft_guard_real_in_caller(&real_from_unsent[fam],
+                                                                 from_unsent_name[fam], caller);
     if (to != NULL) {
-      to(self, sequence, CFR_UNACKNOWLEDGED, false, false);
+      to(self, sequence, unacknowledged[fam], false, false);
       count(DEFERRED);
       return false;
     }
   }
-#endif
   return unsent;
 }
 
@@ -415,8 +457,9 @@ CFT_EXPORT bool cft_change_is_unsent_const(void *self, const void *sequence, uin
     __asm__(CHANGE_IS_UNSENT_CONST);
 bool cft_change_is_unsent_const(void *self, const void *sequence, uint32_t *next_fragment,
                                 void *gap, const void *min_sequence, bool *reactivate) {
-  return change_is_unsent(&real_unsent_const, CHANGE_IS_UNSENT_CONST, __builtin_return_address(0),
-                          self, sequence, next_fragment, gap, min_sequence, reactivate);
+  return change_is_unsent(0, &real_unsent_const, CHANGE_IS_UNSENT_CONST,
+                          __builtin_return_address(0), self, sequence, next_fragment, gap,
+                          min_sequence, reactivate);
 }
 
 CFT_EXPORT bool cft_change_is_unsent(void *self, const void *sequence, uint32_t *next_fragment,
@@ -424,7 +467,16 @@ CFT_EXPORT bool cft_change_is_unsent(void *self, const void *sequence, uint32_t 
     __asm__(CHANGE_IS_UNSENT);
 bool cft_change_is_unsent(void *self, const void *sequence, uint32_t *next_fragment, void *gap,
                           const void *min_sequence, bool *reactivate) {
-  return change_is_unsent(&real_unsent, CHANGE_IS_UNSENT, __builtin_return_address(0), self,
+  return change_is_unsent(0, &real_unsent, CHANGE_IS_UNSENT, __builtin_return_address(0), self,
+                          sequence, next_fragment, gap, min_sequence, reactivate);
+}
+
+CFT_EXPORT bool cft_change_is_unsent3(void *self, const void *sequence, uint32_t *next_fragment,
+                                      void *gap, const void *min_sequence, bool *reactivate)
+    __asm__(CHANGE_IS_UNSENT3);
+bool cft_change_is_unsent3(void *self, const void *sequence, uint32_t *next_fragment, void *gap,
+                           const void *min_sequence, bool *reactivate) {
+  return change_is_unsent(1, &real_unsent3, CHANGE_IS_UNSENT3, __builtin_return_address(0), self,
                           sequence, next_fragment, gap, min_sequence, reactivate);
 }
 
@@ -531,12 +583,17 @@ int cft_status_judge(void **record, const uint8_t *data, uint32_t length, const 
 void cft_status_forget(void *record) { free(record); }
 
 // ---- the status writer's heartbeat period ---------------------------------------------------------
-#if WRITER_TIMES_KNOWN
-// CFT_GUARD_STATUS_HEARTBEAT_MS in ns: 0 for `off`, else 1 to 3000 ms (default STATUS_HEARTBEAT_MS).
-static long status_heartbeat_ns(void) {
+// CFT_GUARD_STATUS_HEARTBEAT_MS: 0 for `off`, else 1 to 3000 ms (default STATUS_HEARTBEAT_MS).
+long cft_status_heartbeat_ms(void) {
   static long period = -1;  // -1: not read yet
-  return cft_guard_env_ms(&period, "CFT_GUARD_STATUS_HEARTBEAT_MS", STATUS_HEARTBEAT_MS, 1, 3000);
+  return cft_guard_env_ms(&period, "CFT_GUARD_STATUS_HEARTBEAT_MS", STATUS_HEARTBEAT_MS, 1, 3000) /
+         1000000L;
 }
+
+void cft_status_heartbeat_set(void) { count(HEARTBEATS); }
+
+#if WRITER_TIMES_KNOWN
+static long status_heartbeat_ns(void) { return cft_status_heartbeat_ms() * 1000000L; }
 
 #define SEEN_WRITERS 64
 static const void *seen_writers[SEEN_WRITERS];  // looked at once each (a reused address is not)

@@ -41,6 +41,12 @@ void cft_status_forget(void *record);
 // _guard_heartbeats.c sees it: heartbeats every CFT_GUARD_STATUS_HEARTBEAT_MS from now on.
 void cft_status_writer(void *writer);
 
+// CFT_GUARD_STATUS_HEARTBEAT_MS: the status writers' heartbeat period, in ms (0: Fast DDS's). On
+// Fast DDS 3.3+ _guard_endpoints.c has the layer set it when it routes a status writer, and tells
+// cft_status_heartbeat_set.
+long cft_status_heartbeat_ms(void);
+void cft_status_heartbeat_set(void);
+
 // _guard_filter.c kept a status reader: from now on the writes' removals are looked at.
 void cft_status_reader_kept(void);
 
@@ -83,5 +89,8 @@ int cft_write_judged_now(void);
 // goes to that reader alone.
 bool cft_write_passes(bool passed);
 int cft_write_passed_now(void);
+// A reader that a Fast DDS 3 routing passed without a verdict (fastdds3/_prefilter.h): another
+// reader asked, and one more passed.
+void cft_write_passes_unjudged(void);
 
 #endif  // CFT_ACTION_GUARD_STATUS_H_

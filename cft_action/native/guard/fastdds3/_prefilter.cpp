@@ -23,6 +23,7 @@
 
 #include "_prefilter.h"
 
+#include "_bytes.hpp"
 #include "_fastdds3_user_data.hpp"
 
 #include <chrono>
@@ -44,17 +45,14 @@ namespace {
 
 using eprosima::fastdds::dds::DataWriter;
 using eprosima::fastdds::dds::DataWriterQos;
+using eprosima::fastdds::dds::Duration_t;
 using eprosima::fastdds::dds::IContentFilter;
 using eprosima::fastdds::dds::InstanceHandle_t;
 using eprosima::fastdds::dds::RETCODE_OK;
 using eprosima::fastdds::rtps::GUID_t;
 using eprosima::fastdds::rtps::SubscriptionBuiltinTopicData;
+using cft_action::guid_bytes;
 using Clock = std::chrono::steady_clock;
-
-void guid_bytes(const GUID_t &guid, uint8_t out[16]) {
-  std::memcpy(out, guid.guidPrefix.value, 12);
-  std::memcpy(out + 12, guid.entityId.value, 4);
-}
 
 // An action's reply writer: each reply only to the readers `verdict` does not refuse.
 class ReplyRouting final : public IContentFilter {
@@ -93,7 +91,10 @@ class MarkedRouting final : public IContentFilter {
                 const GUID_t &reader_guid) const override {
     std::lock_guard<std::mutex> lock(mutex_);
     auto found = readers_.find(reader_guid);
-    if (found == readers_.end() || !found->second.marked) return true;
+    if (found == readers_.end() || !found->second.marked) {
+      if (verdict_.unjudged != nullptr) verdict_.unjudged();
+      return true;
+    }
     uint8_t reader[16];
     guid_bytes(reader_guid, reader);
     return verdict_.judge(&found->second.state, payload.data, payload.length, reader) != 0;
@@ -174,6 +175,17 @@ class MarkedRouting final : public IContentFilter {
   Clock::time_point read_at_;                // the readers' last full reading (under reading_)
 };
 
+// Whether a reliable writer's `qos` had a heartbeat period longer than `ms` (> 0), now `ms`.
+bool shorten_heartbeat(DataWriterQos &qos, int32_t ms) {
+  if (ms <= 0 || qos.reliability().kind != eprosima::fastdds::dds::RELIABLE_RELIABILITY_QOS)
+    return false;
+  Duration_t &period = qos.reliable_writer_qos().times.heartbeat_period;
+  Duration_t wanted(ms / 1000, static_cast<uint32_t>(ms % 1000) * 1000000u);
+  if (!(wanted < period)) return false;
+  period = wanted;
+  return true;
+}
+
 }  // namespace
 
 extern "C" __attribute__((visibility("default"))) int32_t cft_fastdds3_route_replies(
@@ -190,17 +202,20 @@ extern "C" __attribute__((visibility("default"))) int32_t cft_fastdds3_route_rep
 // guard keeps the handle, which it does for the process's life (two per action server).
 extern "C" __attribute__((visibility("default"))) void *cft_fastdds3_route_marked(
     void *datawriter, const cft_marked_verdict *verdict, const char *reader_mark,
-    const char *writer_mark, int32_t *error) {
+    const char *writer_mark, int32_t *heartbeat_ms, int32_t *error) {
   auto *writer = static_cast<DataWriter *>(datawriter);
   try {
     auto routing = std::make_shared<MarkedRouting>(verdict, reader_mark);
     *error = writer->set_sample_prefilter(routing);
     if (*error != RETCODE_OK) return nullptr;
     DataWriterQos qos = writer->get_qos();
-    if (cft_action::append_mark(qos, writer_mark) && (*error = writer->set_qos(qos)) != RETCODE_OK) {
+    bool marked = cft_action::append_mark(qos, writer_mark);
+    bool shorter = shorten_heartbeat(qos, *heartbeat_ms);
+    if ((marked || shorter) && (*error = writer->set_qos(qos)) != RETCODE_OK) {
       writer->set_sample_prefilter(nullptr);
       return nullptr;
     }
+    if (!shorter) *heartbeat_ms = 0;
     return new std::shared_ptr<MarkedRouting>(routing);
   } catch (const std::exception &) {  // no memory: the writer stays as it was
     *error = 1;                       // RETCODE_ERROR

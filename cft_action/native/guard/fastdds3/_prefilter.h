@@ -26,22 +26,27 @@ typedef int32_t (*cft_fastdds3_route_replies_fn)(void *datawriter, cft_reply_ver
 // status writer): 0 when the sample (`data`, `length` bytes, encapsulation included) must not go to
 // `reader` (16 bytes), a reader whose USER_DATA holds the routing's reader mark. *state is that
 // reader's own (NULL at first), which `judge` may set; the layer gives it to `forget` (if not NULL)
-// when the reader goes or loses its mark. Called with the routing's lock held, one at a time.
+// when the reader goes or loses its mark. Called with the routing's lock held, one at a time, as
+// is `unjudged` (if not NULL) for each sample and reader passed without asking `judge` (not
+// marked, or not known yet).
 struct cft_marked_verdict {
   int (*judge)(void **state, const uint8_t *data, uint32_t length, const uint8_t *reader);
   void (*forget)(void *state);
+  void (*unjudged)(void);
 };
 
 // Gives `datawriter` a sample prefilter that asks `verdict` for the readers whose USER_DATA holds
 // `reader_mark`, and passes every other sample and reader; appends `writer_mark` to the writer's
-// USER_DATA (DataWriter::set_qos), so that the readers' processes see that it filters. Returns the
-// routing's handle for CFT_FASTDDS3_MARKED_READERS, or NULL (*error: the ReturnCode_t of the step
-// that failed; the writer then stays as it was). `verdict` must outlive the writer.
+// USER_DATA (DataWriter::set_qos), so that the readers' processes see that it filters; and, with
+// *heartbeat_ms > 0, makes a reliable writer's heartbeat period at most that many ms (the same
+// set_qos: reliable_writer_qos().times), leaving *heartbeat_ms 0 where it did not change it.
+// Returns the routing's handle for CFT_FASTDDS3_MARKED_READERS, or NULL (*error: the ReturnCode_t
+// of the step that failed; the writer then stays as it was). `verdict` must outlive the writer.
 #define CFT_FASTDDS3_ROUTE_MARKED "cft_fastdds3_route_marked"
 typedef void *(*cft_fastdds3_route_marked_fn)(void *datawriter,
                                               const struct cft_marked_verdict *verdict,
                                               const char *reader_mark, const char *writer_mark,
-                                              int32_t *error);
+                                              int32_t *heartbeat_ms, int32_t *error);
 
 // Brings the routing `handle`'s knowledge of which readers are marked up to date with the
 // discovery data of `datawriter` (its writer): the readers matched since the last call, and every
