@@ -91,8 +91,8 @@ bool cft_replies_wanted(void) { return !cft_env_off("CFT_GUARD_REPLIES"); }
 // Whether `name` ends in one of an action's service names, after at least one character, and then
 // in `tail` (a ROS service name: ""; rmw_fastrtps's reply topic: "Reply").
 static bool is_action_service(const char *name, const char *tail) {
+  if (!cft_ends_with(name, tail)) return false;
   size_t n = strlen(name), t = strlen(tail);
-  if (n < t || strcmp(name + n - t, tail) != 0) return false;
   for (size_t i = 0; i < sizeof action_services / sizeof action_services[0]; i++) {
     size_t m = strlen(action_services[i]);
     if (n > m + t && strncmp(name + n - t - m, action_services[i], m) == 0) return true;
