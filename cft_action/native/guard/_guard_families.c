@@ -289,6 +289,12 @@ int cft_loaded_family(void) {
   return fam;
 }
 
+bool cft_guard_env_on(int *cache, const char *env) {
+  int v = __atomic_load_n(cache, __ATOMIC_RELAXED);
+  if (v < 0) __atomic_store_n(cache, v = !cft_env_off(env), __ATOMIC_RELAXED);
+  return v;
+}
+
 bool cft_guard_part_on(int *cache, const char *env, bool usable) {
   int v = __atomic_load_n(cache, __ATOMIC_RELAXED);
   if (v >= 0) return v;

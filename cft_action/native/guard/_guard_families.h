@@ -103,6 +103,10 @@ int cft_guard_knows_fastdds2(void);
 // not yet).
 bool cft_guard_part_on(int *cache, const char *env, bool usable);
 
+// Whether the environment variable `env` leaves a part on (it is not "off" or "0"), in any family.
+// Decided once, cached in *cache (-1: not yet).
+bool cft_guard_env_on(int *cache, const char *env);
+
 // `text` as a number of ms from `min_ms` to `max_ms`, in ns; -1 if it is not one.
 long cft_guard_ms_to_ns(const char *text, long min_ms, long max_ms);
 

@@ -398,9 +398,20 @@ typedef void (*send_heartbeat_fn)(void *self, size_t readers, void *group, bool 
 static void *real_send_heartbeat;
 // Part 4's, below.
 static bool heartbeat_merged(void *self, void *group, bool final, bool liveliness,
-                             send_heartbeat_fn real, const void *return_address, bool separate);
+                             send_heartbeat_fn real, const void *return_address,
+                             bool (*separate)(const void *writer));
 static bool repeats_merged(void *self, void *group);
 static bool separate_sending(const void *writer);
+
+// Whether the piggyback HEARTBEAT of `self` in `group`, not widened, repeats the one merged before
+// its DATA: then it is left out (counted). *widened: whether the piggyback widened it.
+static bool piggyback_repeats_merged(void *self, void *group, bool *widened) {
+  *widened = widened_now;
+  widened_now = false;
+  if (*widened || !in_piggyback || !repeats_merged(self, group)) return false;
+  count(PIGGYBACK_MERGED);
+  return true;
+}
 
 CFT_EXPORT void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final,
                                         bool liveliness) __asm__(SEND_HEARTBEAT);
@@ -410,15 +421,11 @@ void cft_send_heartbeat_nts2(void *self, size_t readers, void *group, bool final
                                                              FASTDDS2_SONAME, SEND_HEARTBEAT);
   if (real == NULL) return;  // unreachable: only that Fast DDS calls this member
   if (heartbeat_merged(self, group, final, liveliness, real, __builtin_return_address(0),
-                       separate_sending(self)))
+                       separate_sending))
     return;
+  bool widened;
+  if (piggyback_repeats_merged(self, group, &widened)) return;
   long interval = piggyback_ns();
-  bool widened = widened_now;
-  widened_now = false;
-  if (!widened && in_piggyback && repeats_merged(self, group)) {
-    count(PIGGYBACK_MERGED);
-    return;
-  }
   if (interval > 0 && !widened && in_piggyback &&
       cft_write_judged_now() == (CFT_KEPT_READER | CFT_OTHER_READER) && !cft_status_write_now() &&
       !due(piggyback_slots, (uintptr_t)self, interval)) {
@@ -442,13 +449,10 @@ void cft_send_heartbeat_nts3(void *self, size_t readers, void *group, bool final
   if (real == NULL) return;  // unreachable: only that Fast DDS calls this member
   // Fast DDS 3's DataWriters never send separately (WriterAttributes::separate_sending is set
   // for builtin writers only: v3.6.2's EDPServer, PDPServer, SecurityManager).
-  if (heartbeat_merged(self, group, final, liveliness, real, caller, false)) return;
-  bool widened = widened_now;
-  widened_now = false;
-  if (!widened && in_piggyback && repeats_merged(self, group)) {
-    count(PIGGYBACK_MERGED);
+  bool widened;
+  if (heartbeat_merged(self, group, final, liveliness, real, caller, NULL) ||
+      piggyback_repeats_merged(self, group, &widened))
     return;
-  }
   real(self, readers, group, final, liveliness);
 }
 
@@ -495,10 +499,10 @@ static const struct cft_rtps_types *merge_types2(void) {
 
 // Fast DDS 3's, where CFT_GUARD_MERGE_GAPS is on and the layer is loaded; else NULL.
 static const struct cft_rtps_types *merge_types3(void) {
-  static int off = -1;  // -1: not read yet
-  int o = __atomic_load_n(&off, __ATOMIC_RELAXED);
-  if (o < 0) __atomic_store_n(&off, o = cft_env_off("CFT_GUARD_MERGE_GAPS"), __ATOMIC_RELAXED);
-  if (o || __atomic_load_n(&merge_broken, __ATOMIC_RELAXED)) return NULL;
+  static int on = -1;  // -1: not read yet
+  if (!cft_guard_env_on(&on, "CFT_GUARD_MERGE_GAPS") ||
+      __atomic_load_n(&merge_broken, __ATOMIC_RELAXED))
+    return NULL;
   return cft_fastdds3_types();
 }
 
@@ -635,15 +639,17 @@ bool cft_add_gap3(void *group, const void *seq, const void *set, const void *rea
 }
 
 // Whether the HEARTBEAT of a send_heartbeat_nts_ returning to `return_address` is that of a GAP
-// held back, and held back with it (`separate`: the writer sends each reader's DATA apart).
+// held back, and held back with it (`separate`, NULL for never: whether the writer sends each
+// reader's DATA apart).
 static bool heartbeat_merged(void *self, void *group, bool final, bool liveliness,
-                             send_heartbeat_fn real, const void *return_address, bool separate) {
+                             send_heartbeat_fn real, const void *return_address,
+                             bool (*separate)(const void *writer)) {
   struct held *h = awaiting_heartbeat;
   awaiting_heartbeat = NULL;
   if (h == NULL || h->group != group || in_piggyback ||
       caller_of((uintptr_t)return_address) != DELIVER)
     return false;
-  if (separate) {
+  if (separate != NULL && separate(self)) {
     // Each reader's DATA goes in a datagram of its own, maybe not this reader's: the GAP goes
     // now, in this reader's, and the HEARTBEAT after it, as Fast DDS sends them.
     held_count--;

@@ -208,10 +208,8 @@ static bool defer_on(int fam) {
     static int on = -1;
     return DEFER_LAYOUT_KNOWN && cft_guard_part_on(&on, "CFT_GUARD_DEFER_OWED", 1) && status_on();
   }
-  static int off = -1;  // -1: not read yet
-  int o = __atomic_load_n(&off, __ATOMIC_RELAXED);
-  if (o < 0) __atomic_store_n(&off, o = cft_env_off("CFT_GUARD_DEFER_OWED"), __ATOMIC_RELAXED);
-  return !o && cft_fastdds3_types() != NULL;
+  static int on3 = -1;  // -1: not read yet
+  return cft_guard_env_on(&on3, "CFT_GUARD_DEFER_OWED") && cft_fastdds3_types() != NULL;
 }
 
 bool cft_status_keeps(const char *topic, const char *type) {
