@@ -48,7 +48,7 @@ KILTED_VENV ?= .venv-kilted
 KILTED_PYTHON ?= python3.12
 KILTED_TREE := build/kilted-tree
 KILTED_TESTS ?= tests/test_fastdds3.py tests/test_fastdds3_replies.py tests/test_fastdds3_feedback.py \
-    tests/test_fastdds3_status.py tests/test_sros2.py \
+    tests/test_fastdds3_status.py tests/test_fastdds3_programs.py tests/test_sros2.py \
     tests/test_build_without_headers.py tests/test_rclpy_contract.py tests/test_errors.py \
     tests/test_sql.py tests/test_filters.py
 # The wheels, by a first install (not in place; its build is replaced by the tree's below).
@@ -152,7 +152,8 @@ compat-kilted: $(KILTED_VENV)/.installed
 # build/fuzz/artifacts/. CI runs `make fuzz FUZZ_SECONDS=10`. The harnesses read Fast DDS objects at
 # the offsets of the headers the venv has: _fastdds_layout.h, generated as setup.py generates it.
 FUZZ_SECONDS ?= 60
-FUZZ_TARGETS := uuid node rate filter_class status_trim guard_status guard_filter writer_marks
+FUZZ_TARGETS := uuid node rate filter_class status_trim guard_status guard_filter guard_programs \
+    writer_marks
 FUZZ_DIR := build/fuzz
 FUZZ_CC := clang-14
 FUZZ_CFLAGS := -g -O1 -Wall -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=undefined \
@@ -169,10 +170,13 @@ FUZZ_SOURCES_guard_status := $(NATIVE)/guard/_guard_goals.c $(NATIVE)/guard/_gua
     $(NATIVE)/_endpoint_times.c fuzz/guard_stubs.c
 FUZZ_SOURCES_guard_filter := $(NATIVE)/guard/_guard_status.c $(FUZZ_SOURCES_guard_status) \
     $(FUZZ_CLASSES)
+FUZZ_SOURCES_guard_programs := $(NATIVE)/guard/_guard_programs.c $(NATIVE)/guard/_guard_feedback.c \
+    $(NATIVE)/guard/_guard_status.c $(FUZZ_SOURCES_guard_status) $(FUZZ_CLASSES)
 FUZZ_SOURCES_writer_marks := $(NATIVE)/reader/_patch.c
 # clang reads the cleanup variable of _guard_status.c's cft_rtps_is_relevant as unused.
 FUZZ_FLAGS_guard_status := -Wno-unused-variable
 FUZZ_FLAGS_guard_filter := -Wno-unused-variable
+FUZZ_FLAGS_guard_programs := -Wno-unused-variable
 
 fuzz-toolchain:
 	@command -v $(FUZZ_CC) >/dev/null && dpkg -s libfuzzer-14-dev >/dev/null 2>&1 || \

@@ -8,10 +8,10 @@ Their sources are in ``cft_action/native/``, by the process they run in:
   DDS is loaded and where its real members are), ``_guard_filter.c`` (the DDS-SQL accelerator),
   ``_guard_writer_qos.c`` (the writers' filtered-reader limit and mark), ``_guard_heartbeats.c``,
   ``_guard_replies.c``, ``_guard_status.c``, ``_guard_goals.c``, ``_guard_feedback.c``,
-  ``_guard_endpoints.c`` and ``_guard_log.c``;
+  ``_guard_programs.c``, ``_guard_endpoints.c`` and ``_guard_log.c``;
 - ``native/guard/fastdds3/`` builds ``_cftguard_fastdds3``, the guard's Fast DDS 3.3+ layer (C++,
   public API: the writers' sample prefilter and USER_DATA), and ``native/reader/fastdds3/``
-  ``_cftreader_fastdds3``, the client's (its feedback reader's USER_DATA), only where Fast DDS 3.3+
+  ``_cftreader_fastdds3``, the client's (its readers' USER_DATA marks), only where Fast DDS 3.3+
   headers and their library are found; each is linked against that Fast DDS, and loaded only into
   a process that has it loaded;
 - ``native/reader/`` builds ``_cftreader``, loaded with ctypes by ``cft_action._rcl`` into every

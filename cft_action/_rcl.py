@@ -268,6 +268,7 @@ _SYMBOLS: dict[str, tuple[ctypes.CDLL, Any, list[Any], Optional[Callable]]] = {
     'cft_fastdds3_reader_mark': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_fastdds3_status_reader_mark': (_reader_lock, ctypes.c_char_p, [], None),
     'cft_fastdds3_writer_mark': (_reader_lock, ctypes.c_char_p, [], None),
+    'cft_fastdds3_program_mark': (_reader_lock, ctypes.c_char_p, [], None),
     # The Python C API, to reach the C functions that rosidl generates for every message type.
     'PyCapsule_GetName': (ctypes.pythonapi, ctypes.c_char_p, [ctypes.py_object], None),
     'PyCapsule_GetPointer':
@@ -488,6 +489,12 @@ _FASTDDS3_SYMBOLS: dict[str, tuple[str, str, Any, list[Any]]] = {
     'marked_writers':
         ('layer', 'cft_fastdds3_marked_writers', ctypes.c_int32,
          [_void_p, ctypes.c_char_p, ctypes.POINTER(ctypes.c_int32)]),
+    'mark_program':
+        ('layer', 'cft_fastdds3_mark_program', ctypes.c_int32,
+         [_void_p, ctypes.c_char_p, ctypes.c_char_p]),
+    'writer_marked':
+        ('layer', 'cft_fastdds3_writer_marked', ctypes.c_int32,
+         [_void_p, ctypes.c_char_p, ctypes.c_char_p]),
     'datareader': ('librmw_fastrtps_cpp.so', _GET_DATAREADER, _void_p, [_void_p]),
 }
 
@@ -499,6 +506,8 @@ class _Fastdds3Layer:
         self.reason = ''
         self.mark_reader: Any = None
         self.marked_writers: Any = None
+        self.mark_program: Any = None
+        self.writer_marked: Any = None
         self.datareader: Any = None
         if get_rmw_implementation_identifier() != 'rmw_fastrtps_cpp':
             self.reason = f'{get_rmw_implementation_identifier()} is not rmw_fastrtps_cpp'
@@ -559,6 +568,38 @@ def marked_writers(subscription_ptr: int) -> tuple[int, int]:
         reader, _lib.cft_fastdds3_writer_mark(), ctypes.byref(marked)) if (
         reader) else -1
     return marked.value, matched
+
+
+def mark_reader_program(subscription_ptr: int, filter_class: str, expression: str) -> str:
+    """Ask guarded Fast DDS 3.3+ writers to apply ``expression``, a program of the library's
+    ``filter_class`` (RATE_FILTER_CLASS or NODE_FILTER_CLASS), to this subscription's reader: its
+    USER_DATA's program mark (native/_filter_class.h, CFT_PROGRAM_READER_MARK) becomes it
+    (DataReader::set_qos; the writers read it within CFT_FASTDDS3_REREAD_MS). Return why not, or
+    ``''``."""
+    layer = _fastdds3_layer()
+    if layer.reason:
+        return f"the client's Fast DDS 3 layer is off: {layer.reason}"
+    if ';' in expression:
+        return f'the program {expression!r} holds a ";", which ends a mark'
+    reader = _datareader(subscription_ptr)
+    if not reader:
+        return 'the subscription has no rmw_fastrtps_cpp DataReader'
+    prefix = _lib.cft_fastdds3_program_mark()
+    mark = prefix + f'{filter_class} {expression};'.encode()
+    ret = layer.mark_program(reader, prefix, mark)
+    return f'DataReader::set_qos returned {ret}' if ret != 0 else ''
+
+
+def writer_marked(subscription_ptr: int, gid: bytes) -> Optional[bool]:
+    """Whether the writer ``gid``, matched by the subscription's reader (marked by
+    :func:`mark_reader_program`), applies the library's marks (a guarded Fast DDS 3.3+ writer's:
+    CFT_WRITER_MARK); None when it is not matched (or Fast DDS did not answer)."""
+    reader = _datareader(subscription_ptr)
+    if not reader:
+        return None
+    marked = _fastdds3_layer().writer_marked(reader, bytes(gid)[:16],
+                                             _lib.cft_fastdds3_writer_mark())
+    return None if marked < 0 else bool(marked)
 
 
 def publisher_gid(publisher: int) -> bytes:

@@ -378,6 +378,34 @@ def feedback_counts() -> dict[str, int]:
     return _counters('cft_guard_feedback_count', FEEDBACK_COUNTERS)
 
 
+#: The counters of cft_guard_program_count() in _guard_programs.c, in its order.
+PROGRAM_COUNTERS = ('writers', 'verdicts', 'withheld', 'refused', 'malformed')
+
+#: Environment variable that turns the readers' programs off in guarded writers (``off`` or ``0``).
+PROGRAMS_ENV = 'CFT_GUARD_PROGRAMS'
+
+
+def program_counts() -> dict[str, int]:
+    """Return what this process's writers did with the programs their readers mark, on Fast DDS
+    3.3+.
+
+    There, every writer but an action's feedback and status writers gets a sample prefilter
+    (public Fast DDS API) that applies, to each reader whose USER_DATA holds a program mark (the
+    library's rate-limited and polled subscriptions, and its ParameterEventHandler, where their
+    filter classes cannot be used), that program: a rate limit and polls, or a list of nodes
+    (cft_action/native/guard/_guard_programs.c). ``CFT_GUARD_PROGRAMS=off`` turns it off. On Fast
+    DDS 2.14 the classes are content filters instead (:func:`filter_class_counts`). Keys:
+
+    - ``writers``: writers given the prefilter (and the mark that says so);
+    - ``verdicts``: samples judged for marked readers; of those, ``withheld`` went not to it;
+      ``malformed``: parameter events passed because their node could not be read;
+    - ``refused``: marks outside the classes' grammars (such a reader gets every sample).
+
+    An empty dict when the guard is not preloaded.
+    """
+    return _counters('cft_guard_program_count', PROGRAM_COUNTERS)
+
+
 #: The counters of cft_guard_status_count() in _guard_status.c, in its order.
 STATUS_COUNTERS = ('requests', 'implausible', 'verdicts', 'changed', 'owed', 'withheld',
                    'unknown', 'malformed', 'resets', 'kept', 'deferred', 'heartbeat_periods',

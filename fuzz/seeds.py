@@ -150,6 +150,14 @@ def seeds() -> dict[str, dict[str, bytes]]:
                                    type_name=EVENT_TYPE, topic='rt/parameter_events') + b'\x01'
             + b'\x00' + sample(event('/robot/planner')),
         },
+        'guard_programs': {
+            'seed_rate': b'\x00' + sample(f'CFT_ACTION_RATE {slow}'.encode()) + b'\x01'
+            + sample(b'\0\1\0\0') + b'\x01' + sample(b'\0\1\0\0') + b'\x00'
+            + sample(f'CFT_ACTION_RATE {polled}'.encode()) + b'\x01' + sample(b''),
+            'seed_node': b'\x00' + sample(f'CFT_ACTION_NODE {node_options.filter_expression}'
+                                          .encode()) + b'\x01' + sample(event('/robot/driver'))
+            + b'\x01' + sample(event('/other')) + b'\x00' + sample(b'CFT_ACTION_NODE node = node'),
+        },
         'writer_marks': {
             'seed_marked_writer': sample(b'typehash=RIHS01_' + b'ab' * 32 + b';cft_action=filters;')
             + b'\x00' + PARTICIPANT + rpd('', '', type_name=FEEDBACK_TYPE, topic=feedback_topic)

@@ -8,12 +8,14 @@ line:
   burst N            set ``value`` to 1..N on every node, interleaved; replies BURST N
   matched N          wait until every node's /parameter_events publisher has at least N matched
                      subscriptions; replies MATCHED or TIMEOUT
+  programs           replies PROGRAMS {...}: cft_action.guard.program_counts() in this process
   remote NODE PARAM true|false
                      set a bool parameter of another process's NODE through its parameter
                      service; replies REMOTE OK or REMOTE FAIL <reason>
 """
 
 import functools
+import json
 import sys
 import threading
 
@@ -23,6 +25,7 @@ from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
 
+from cft_action import guard
 from harness.polling import TIMEOUT, wait_until
 from harness.ros import leave_spinning_process
 
@@ -87,6 +90,8 @@ def main() -> None:
             matched = wait_until(functools.partial(subscribed, list(nodes.values()),
                                                    int(words[1])))
             print('MATCHED' if matched else 'TIMEOUT', flush=True)
+        elif words[0] == 'programs':
+            print(f'PROGRAMS {json.dumps(guard.program_counts())}', flush=True)
         elif words[0] == 'remote':
             if words[1] not in clients:
                 clients[words[1]] = AsyncParameterClient(client_node, words[1])

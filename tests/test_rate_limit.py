@@ -91,17 +91,23 @@ def assert_where(ros, subscription, mode):
         assert state.reader_verdicts > 0, state
 
 
-def test_max_rate_per_publisher(ros, runs):
-    """0.9-1.0x of HZ per publisher over 5 s, guarded and unguarded publishers side by side."""
-    hz, seconds = 10, 5
+def max_rate_run(ros, runs, hz, seconds):
+    """A ``max_rate=hz`` subscription of each run, its publishers at SOURCE_HZ for ``seconds``:
+    0.9-1.0x of ``hz`` per publisher. Returns the subscriptions by mode."""
     subscribed = {mode: subscribe(ros, topic, max_rate=hz) for mode, (topic, _) in runs.items()}
     publish(ros, seconds, *(children for _, children in runs.values()))
     ros.spin_for(0.5)
-    for mode, (subscription, received) in subscribed.items():
+    for mode, (_, received) in subscribed.items():
         counts = per_publisher(received)
         for index in range(len(BASES)):
             # at most one per 1/HZ (the first comes at once), and the first after each interval
             assert 0.9 * hz * seconds <= counts[index] <= hz * seconds + 1, (mode, counts)
+    return {mode: subscription for mode, (subscription, _) in subscribed.items()}
+
+
+def test_max_rate_per_publisher(ros, runs):
+    """0.9-1.0x of HZ per publisher over 5 s, guarded and unguarded publishers side by side."""
+    for mode, subscription in max_rate_run(ros, runs, 10, 5).items():
         assert_where(ros, subscription, mode)
     for child in runs['guarded'][1]:
         # the subscriber alone on the writer: its GAP for the withheld run rides in the DATA
@@ -109,9 +115,11 @@ def test_max_rate_per_publisher(ros, runs):
         assert counts['gaps_merged'] > 0 and counts['merges_dropped'] == 0, counts
 
 
-def test_polls_are_exact_per_publisher(ros, runs):
-    """Three polls of 2, guarded and unguarded publishers side by side: exactly 2 more of each
-    publisher after each, nothing before the first; stop_polling takes every message again."""
+def three_polls(ros, runs):
+    """Three polls of 2 on a ``poll=0`` subscription of each run, its publishers at SOURCE_HZ for
+    6 s: exactly 2 more of each publisher after each, nothing before the first; then
+    stop_polling takes every message again. Returns the subscriptions by mode, once every
+    publisher has sent all."""
     polled = {mode: subscribe(ros, topic, poll=0) for mode, (topic, _) in runs.items()}
     children = [child for _, group in runs.values() for child in group]
     for child in children:
@@ -134,10 +142,16 @@ def test_polls_are_exact_per_publisher(ros, runs):
         assert rate_filter_state(subscription, ros.node).polled == 6
         stop_polling(subscription)
     assert ros.spin_until(lambda: all(len(received) > 30 for _, received in polled.values()),
-                          timeout=3)
+                          timeout=3), {mode: per_publisher(received)
+                                       for mode, (_, received) in polled.items()}
     for child in children:
         ros.spin_until(lambda c=child: c.last('SENT') is not None, timeout=20)
-    for mode, (subscription, _) in polled.items():
+    return {mode: subscription for mode, (subscription, _) in polled.items()}
+
+
+def test_polls_are_exact_per_publisher(ros, runs):
+    """Three polls of 2, guarded and unguarded publishers side by side (three_polls)."""
+    for mode, subscription in three_polls(ros, runs).items():
         assert_where(ros, subscription, mode)
 
 

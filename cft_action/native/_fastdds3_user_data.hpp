@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cstring>
+#include <string>
 #include <vector>
 
 #include <fastdds/rtps/common/Types.hpp>
@@ -21,6 +22,18 @@ inline bool user_data_holds(const std::vector<eprosima::fastdds::rtps::octet> &d
   return mark != end && std::search(data.begin(), data.end(), mark, end) != data.end();
 }
 
+// Whether `data` holds a mark that starts with `prefix`; then *value is the rest of the mark, up to
+// its ';' (or the end of `data`).
+inline bool user_data_value(const std::vector<eprosima::fastdds::rtps::octet> &data,
+                            const char *prefix, std::string *value) {
+  const char *end = prefix + std::strlen(prefix);
+  auto at = std::search(data.begin(), data.end(), prefix, end);
+  if (prefix == end || at == data.end()) return false;
+  at += end - prefix;
+  value->assign(at, std::find(at, data.end(), ';'));
+  return true;
+}
+
 // `mark` appended to the USER_DATA of `qos` (a DataWriterQos or DataReaderQos), unless it holds it
 // already: whether it changed (then the caller sets the QoS).
 template <typename Qos>
@@ -29,6 +42,25 @@ bool append_mark(Qos &qos, const char *mark) {
   if (user_data_holds(data, mark)) return false;
   data.insert(data.end(), mark, mark + std::strlen(mark));
   qos.user_data().resize(data.size());  // as rmw_fastrtps sets it
+  qos.user_data().setValue(data);
+  return true;
+}
+
+// The mark that starts with `prefix` in the USER_DATA of `qos` (a DataReaderQos) made `mark`
+// (which starts with it and ends with ';'), appended if there was none: whether it changed.
+template <typename Qos>
+bool replace_mark(Qos &qos, const char *prefix, const char *mark) {
+  std::vector<eprosima::fastdds::rtps::octet> data = qos.user_data().data_vec();
+  const char *prefix_end = prefix + std::strlen(prefix);
+  auto at = std::search(data.begin(), data.end(), prefix, prefix_end);
+  if (at != data.end()) {
+    auto end = std::find(at, data.end(), ';');
+    if (end != data.end()) ++end;
+    if (std::equal(at, end, mark, mark + std::strlen(mark))) return false;
+    data.erase(at, end);
+  }
+  data.insert(data.end(), mark, mark + std::strlen(mark));
+  qos.user_data().resize(data.size());
   qos.user_data().setValue(data);
   return true;
 }

@@ -47,6 +47,13 @@
 // The same for its status reader: a guarded server sends it only the status samples that change its
 // goals, or that it is owed (native/guard/_guard_status.c).
 #define CFT_STATUS_READER_MARK "cft_action=own_status;"
+// What a reader of any topic adds on Fast DDS 3.3+, where these classes cannot be its content
+// filter: this prefix, one of the classes with a per-reader program (CFT_RATE_CLASS,
+// CFT_NODE_CLASS), a space, the program's expression in that class's grammar, and ';'. A guarded
+// writer then applies the program to that reader (native/guard/_guard_programs.c); the reader's
+// process still applies it too, so that an unguarded writer, or one that has not read the mark
+// yet, changes nothing (cft_action/topics/rate.py).
+#define CFT_PROGRAM_READER_MARK "cft_action=program:"
 
 // A class's grammar: how an expression compiles to a program (one malloc'd block, or NULL outside
 // the grammar), and a program's verdict on a serialized sample (a SerializedPayload_t *). A class

@@ -117,10 +117,9 @@ struct node_program *cft_node_compile(const char *expression) {
 }
 
 // ---- the sample ----------------------------------------------------------------------------------
-const char *cft_event_node(const void *payload, uint32_t *length) {
-  uint32_t body_length;
-  bool little;
-  const uint8_t *body = cft_cdr_body(payload, &body_length, &little);
+// The node name in the body of a serialized event (`body`, `body_length` bytes, in its byte order).
+static const char *node_in(const uint8_t *body, uint32_t body_length, bool little,
+                           uint32_t *length) {
   if (body == NULL || body_length < 12) return NULL;
   const uint8_t *b = body + 8;  // after stamp.sec and stamp.nanosec: the string's length, with NUL
   uint32_t n = little ? (uint32_t)b[0] | (uint32_t)b[1] << 8 | (uint32_t)b[2] << 16 |
@@ -130,6 +129,20 @@ const char *cft_event_node(const void *payload, uint32_t *length) {
   if (n == 0 || n > body_length - 12 || body[12 + n - 1] != '\0') return NULL;
   *length = n - 1;
   return (const char *)body + 12;
+}
+
+const char *cft_event_node(const void *payload, uint32_t *length) {
+  uint32_t body_length = 0;
+  bool little = false;
+  const uint8_t *body = cft_cdr_body(payload, &body_length, &little);
+  return node_in(body, body_length, little, length);
+}
+
+const char *cft_event_node_bytes(const uint8_t *data, uint32_t size, uint32_t *length) {
+  uint32_t body_length = 0;
+  bool little = false;
+  const uint8_t *body = cft_cdr_bytes(data, size, &body_length, &little);
+  return node_in(body, body_length, little, length);
 }
 
 // Exported for the grammar test: 1 if `expression` compiles and the event `payload` (a

@@ -23,5 +23,8 @@ bool cft_node_matches(const struct node_program *p, const char *node, uint32_t l
 // its length without the terminator, or NULL when the sample is not plain CDR or too short for
 // its own string. The body opens with builtin_interfaces/Time (int32, uint32), then the string.
 const char *cft_event_node(const void *payload, uint32_t *length);
+// The same for the event's serialized bytes (`size` of them, encapsulation included), as Fast DDS
+// 3's public API hands them over.
+const char *cft_event_node_bytes(const uint8_t *data, uint32_t size, uint32_t *length);
 
 #endif  // CFT_ACTION_NODE_PROGRAM_H_

@@ -10,6 +10,7 @@ node-agnostic callback is registered, or the user's own), :class:`FilteredReader
 from __future__ import annotations
 
 import threading
+import time
 from collections import Counter
 from typing import Any, Callable, NamedTuple, Optional, Sequence
 
@@ -21,6 +22,7 @@ from rclpy.subscription import Subscription
 
 from cft_action import _rcl
 from cft_action.topics._filtered_reader import filter_class_for, FilteredReader
+from cft_action.topics._program_mark import ProgramMark, REREAD_S
 from cft_action._rclpy_compat import PromptLogger
 from cft_action.topics.arrival import ArrivalGate, ProbeTarget, RemotePublishers
 from cft_action.errors import ContentFilterError
@@ -175,6 +177,10 @@ class ParameterEventFilter:
         self._gate = ArrivalGate(node, lambda: parameter_services(publishers), self.reader.lock)
         self._received_lock = threading.Lock()  # the event path takes only this one
         self._received = 0
+        # Where the node class cannot be the reader's filter (Fast DDS 3.3+): the reader's program
+        # mark, which the watched nodes' guarded writers apply; the handler's callbacks still see
+        # only their own nodes' events, as rclpy's do.
+        self._mark: Optional[ProgramMark] = None
         self._state = ParameterEventFilterState('nodes', False, '', '', (), 0, (), 0, True)
 
     @property
@@ -182,9 +188,11 @@ class ParameterEventFilter:
         """The latest snapshot, with the events received so far."""
         with self._received_lock:
             received = self._received
-        return self._state._replace(events_received=received,
-                                    filtered_in=self.reader.filtered_in(
-                                        received, self._publishers.gids))
+        if self._mark is not None:
+            where = 'writer' if self._mark.all_route(self._publishers.gids()) else 'none'
+        else:
+            where = self.reader.filtered_in(received, self._publishers.gids)
+        return self._state._replace(events_received=received, filtered_in=where)
 
     def subscribe(self, node: Node, deliver: Callable[[ParameterEvent], None],
                   cft_supported: bool, **kwargs: Any) -> Subscription:
@@ -221,10 +229,27 @@ class ParameterEventFilter:
                             self.reader.adopt(subscription.handle, subscription.handle.pointer,
                                               PARAMETER_EVENTS_TOPIC, nothing, created)
                         return subscription
-                return node.create_subscription(ParameterEvent, PARAMETER_EVENTS_TOPIC,
-                                                callback, qos_profile, **kwargs)
+                subscription = node.create_subscription(ParameterEvent, PARAMETER_EVENTS_TOPIC,
+                                                        callback, qos_profile, **kwargs)
+                if self.reader.filter_class is not None:
+                    self._mark_reader(subscription)
+                return subscription
             finally:
                 self._publish_state()
+
+    def _mark_reader(self, subscription: Subscription) -> None:
+        """Where the node class cannot be the reader's filter: mark the reader with the program
+        (Fast DDS 3.3+), so that guarded nodes' writers send only the watched nodes' events."""
+        with subscription.handle:
+            pointer = subscription.handle.pointer
+        self._mark, refused = ProgramMark.install(subscription.handle, pointer,
+                                                  _rcl.NODE_FILTER_CLASS,
+                                                  self._wanted()[2].filter_expression)
+        if self._mark is not None:
+            self._logger.info(
+                'the parameter event subscription asks nodes that run under cft-action guard '
+                '(Fast DDS 3.3+) for the watched nodes\' events only; other nodes send every '
+                'event, as to rclpy')
 
     # --- what the callbacks want ----------------------------------------------------------------
 
@@ -312,13 +337,20 @@ class ParameterEventFilter:
         with self.reader.lock:
             if self.reader.ended:
                 return False
-            target = self.reader.updates
+            target = self._version()
             if self._gate.is_confirmed(target):
                 return True
+        start = time.monotonic()
         if not self._gate.wait(target, timeout_sec):
             return False
+        if self._mark is not None:  # the writers read the arrived mark at their next write
+            left = REREAD_S if timeout_sec is None else min(
+                REREAD_S, timeout_sec - (time.monotonic() - start))
+            if left < REREAD_S:
+                return False
+            time.sleep(left)
         with self.reader.lock:
-            if self.reader.ended or self.reader.updates != target:
+            if self.reader.ended or self._version() != target:
                 return False
             self._publish_state()
         return True
@@ -343,13 +375,25 @@ class ParameterEventFilter:
         # The library's class takes no parameters: its names are in the expression.
         return node_filter(node_names, parameters=self.reader.filter_class is None)
 
+    def _version(self) -> int:
+        """The filter's version that the writers are to apply: its changes, or its mark's."""
+        return self.reader.updates + (self._mark.updates if self._mark is not None else 0)
+
     def _refresh(self) -> None:
         """Bring the middleware's filter in line with the callbacks, if it differs from them."""
+        wanted = self._wanted()[2]
         if self.reader.filter is not None:
-            wanted = self._wanted()[2]
             # In place, from one non-empty expression to another: safe under a spinning executor.
             if self.reader.update(wanted):
                 self._log_change(wanted)
+        elif self._mark is not None:
+            why = self._mark.change(wanted.filter_expression)
+            if why and self._mark.change(ALL_NODES):
+                self._logger.warning(f'the parameter event subscription\'s mark could not '
+                                     f'change ({why}): guarded nodes may withhold watched events')
+            elif why:
+                self._logger.warning(f'the parameter event subscription\'s mark could not '
+                                     f'change ({why}): it asks for every event now')
         self._publish_state()
 
     def _log_change(self, options: ContentFilterOptions) -> None:
@@ -358,7 +402,9 @@ class ParameterEventFilter:
 
     def _publish_state(self) -> None:
         common = self.reader.state
-        if self.reader.filter is None:
+        if self.reader.filter is None and self._mark is not None:
+            mode, reason = self._wanted()[0], common.reason  # the writers' mark, no reader filter
+        elif self.reader.filter is None:
             mode, reason = 'off', common.reason
         else:
             mode, reason, _ = self._wanted()
@@ -366,4 +412,4 @@ class ParameterEventFilter:
             common = common.unfiltered(reason)
         self._state = ParameterEventFilterState(
             mode, **common._asdict(), watched_nodes=tuple(sorted(self._watched)),
-            events_received=0, confirmed=self._gate.is_confirmed(common.updates))
+            events_received=0, confirmed=self._gate.is_confirmed(self._version()))

@@ -36,6 +36,7 @@ from rclpy.subscription import Subscription
 from cft_action import _rcl, guard
 from cft_action.errors import ContentFilterError, InvalidArgumentError
 from cft_action.topics._filtered_reader import apply_filter
+from cft_action.topics._program_mark import ProgramMark, REREAD_S
 
 __all__ = ['RateFilterState', 'active_subscription_count', 'poll', 'rate_filter_state',
            'set_max_rate', 'stop_polling']
@@ -49,9 +50,12 @@ class RateFilterState(NamedTuple):
     :ivar polled: the messages polled so far, per publisher (the sum of every poll's ``n``).
     :ivar filtered_in: where messages beyond the rate or the polls are dropped: ``'writer'`` (by
         every publisher: all run under the guard), ``'reader'`` (this process's DDS reader drops
-        those of at least one publisher that sent them), ``'python'`` (the class cannot be used:
-        the callback drops them), or ``'unknown'`` (no publisher is matched yet).
-    :ivar reason: why the middleware does not filter (``filtered_in == 'python'``), else ``''``.
+        those of at least one publisher that sent them), ``'python'`` (the callback drops those of
+        at least one publisher: the class cannot be used), or ``'unknown'`` (no publisher is
+        matched yet).
+    :ivar reason: why this process's DDS reader cannot filter (the class cannot be used: the
+        callback then applies the rule, and on Fast DDS 3.3+ guarded publishers apply it too),
+        else ``''``.
     :ivar reader_verdicts: the verdicts this process's DDS reader gave, one per message that a
         publisher sent without deciding (0 while every publisher decides).
     :ivar layout_mismatches: messages that this process's rate filters passed unfiltered because
@@ -91,9 +95,23 @@ def _check_count(name: str, n: Any) -> int:
     return n
 
 
+class _Publisher:
+    """One publisher's side of a rate filter applied in this process (``_rate_program.c``'s)."""
+
+    __slots__ = ('passed_at', 'remaining')
+
+    def __init__(self, remaining: int) -> None:
+        self.passed_at: Optional[int] = None  # ns of the last message that passed
+        self.remaining = remaining  # polled messages still to pass
+
+
+#: How long a publisher that does not apply the reader's mark is taken to stay so, in seconds.
+_ROUTES_RECHECK_S = REREAD_S
+
+
 class RateFilter:
     """One subscription's rate limit and polls: the expression that says them, and, where the class
-    cannot be used, the same rule applied in Python.
+    cannot be used, the same rule applied in this process, per publisher.
 
     :param max_rate: Hz, or None.
     :param poll: the messages polled at creation, or None for a subscription that does not poll.
@@ -104,20 +122,33 @@ class RateFilter:
         self.can_poll = poll is not None
         self.polling = poll is not None
         self.total = self.last = 0 if poll is None else _check_count('poll', poll)
-        self.reason = ''  # why the class is not used: then the Python gate filters
+        self.reason = ''  # why the class is not used: then the gate filters
         self.created: Optional[int] = None  # the class's filter in this process's reader
+        # Where the class is not used, on Fast DDS 3.3+: the reader's program mark, which guarded
+        # publishers apply (set by the subscription).
+        self.mark: Optional[ProgramMark] = None
         self._lock = threading.Lock()
-        self._next_pass = 0.0
-        self._remaining = self.last
+        self._publishers: dict[Optional[bytes], _Publisher] = {}
+        self._routed: dict[bytes, tuple[bool, float]] = {}  # GID: (applies the mark, when seen)
+
+    def period_ns(self) -> int:
+        """The rate limit's period in ns (0: none); past the grammar's INT64_MAX (292 years) it."""
+        if self.max_rate is None:
+            return 0
+        ns = 1e9 / self.max_rate
+        return MAX_PERIOD_NS if ns >= MAX_PERIOD_NS else max(1, round(ns))
 
     def expression(self) -> str:
         """The filter in the class's grammar (``cft_action/native/_rate_program.h``)."""
-        period = 0
-        if self.max_rate is not None:  # periods past the grammar's INT64_MAX ns (292 years) are it
-            ns = 1e9 / self.max_rate
-            period = MAX_PERIOD_NS if ns >= MAX_PERIOD_NS else max(1, round(ns))
         polled = f' poll={self.total}/{self.last}' if self.polling else ''
-        return f'period={period}{polled}'
+        return f'period={self.period_ns()}{polled}'
+
+    def writer_expression(self) -> str:
+        """The program that this reader's mark asks guarded Fast DDS 3.3+ writers to apply: the
+        filter, with each poll's last count raised to the total, so that a writer that learns of
+        the reader late never passes fewer messages than this process's gate takes."""
+        polled = f' poll={self.total}/{self.total}' if self.polling else ''
+        return f'period={self.period_ns()}{polled}'
 
     def poll(self, n: int) -> None:
         """Ask for ``n`` more messages of each publisher."""
@@ -129,7 +160,8 @@ class RateFilter:
         with self._lock:
             self.total += n
             self.last = n
-            self._remaining = n if not self.polling else self._remaining + n
+            for publisher in self._publishers.values():
+                publisher.remaining = publisher.remaining + n if self.polling else n
             self.polling = True
 
     def stop_polling(self) -> None:
@@ -143,34 +175,65 @@ class RateFilter:
         with self._lock:
             self.max_rate = checked
 
+    def _applies_mark(self, gid: Optional[bytes]) -> bool:
+        """Whether publisher ``gid``'s writer applies this reader's mark (known to stay so)."""
+        if gid is None or self.mark is None:
+            return False
+        known = self._routed.get(gid)
+        now = time.monotonic()
+        if known is None or (not known[0] and now - known[1] >= _ROUTES_RECHECK_S):
+            known = (bool(self.mark.routes(gid)), now)
+            self._routed[gid] = known
+        return known[0]
+
+    def passes(self, info: Any) -> bool:
+        """The verdict on a message with rclpy's message ``info`` (None: not known): per
+        publisher where ``info`` names it, else for all publishers together.
+
+        A publisher that applies the reader's mark sent only what its program passed, on its own
+        clock: its messages are held to half the period, so that a message it passed is never
+        dropped for arriving early, while one it sent before it knew the mark still counts."""
+        gid, at = None, 0
+        if isinstance(info, dict):
+            publisher = info.get('publisher_gid')
+            if isinstance(publisher, dict) and publisher.get('data') is not None:
+                gid = bytes(publisher['data'])[:16]
+            at = info.get('source_timestamp') or 0
+        at = at or time.monotonic_ns()
+        slack = self._applies_mark(gid)
+        with self._lock:
+            publisher = self._publishers.get(gid)
+            if publisher is None:
+                publisher = self._publishers[gid] = _Publisher(self.last)
+            if self.polling and publisher.remaining == 0:
+                return False
+            period = self.period_ns()
+            if period and publisher.passed_at is not None:
+                if at < publisher.passed_at + (period - period // 2 if slack else period):
+                    return False
+            publisher.passed_at = at
+            if self.polling:
+                publisher.remaining -= 1
+        return True
+
     def gate(self, callback: Callable[..., Any]) -> Callable[..., Any]:
-        """``callback`` behind the same rule in Python, for a subscription the class cannot
-        filter: it is applied to all publishers together, since rclpy's callbacks do not say
-        which publisher a message came from. It takes the message info where ``callback`` takes
-        it (rclpy's rule: a callback that cannot be called with the message alone)."""
-        def passes() -> bool:
-            with self._lock:
-                now = time.monotonic()
-                if self.polling and self._remaining == 0:
-                    return False
-                if self.max_rate is not None and now < self._next_pass:
-                    return False
-                self._next_pass = now + 1.0 / self.max_rate if self.max_rate else 0.0
-                if self.polling:
-                    self._remaining -= 1
-            return True
-
-        def with_info(message: Any, info: Any) -> Any:
-            return callback(message, info) if passes() else None
-
-        def message_only(message: Any) -> Any:
-            return callback(message) if passes() else None
-
+        """``callback`` behind the same rule, for a subscription the class cannot filter. It takes
+        rclpy's message info, to tell publishers apart (rclpy 7.1 and later say which publisher
+        sent a message; before, all publishers are taken together), and passes it on where
+        ``callback`` takes it (rclpy's rule: a callback that cannot be called with the message
+        alone)."""
         try:
             inspect.signature(callback).bind(object())
+            with_info = False
         except TypeError:
-            return with_info
-        return message_only
+            with_info = True
+
+        def gated(message: Any, info: Any) -> Any:
+            if not self.passes(info):
+                return None
+            return callback(message, info) if with_info else callback(message)
+
+        return gated
 
 
 #: The rate filters of the subscriptions made with ``max_rate`` or ``poll``.
@@ -192,8 +255,13 @@ def _filter_of(subscription: Subscription) -> RateFilter:
 
 
 def _apply(subscription: Subscription, rate_filter: RateFilter) -> None:
-    if rate_filter.reason:
-        return  # filtered in Python: the gate reads the filter's fields
+    if rate_filter.reason:  # filtered in this process: the gate reads the filter's fields
+        if rate_filter.mark is not None:
+            why = rate_filter.mark.change(rate_filter.writer_expression())
+            if why:
+                raise ContentFilterError(f'{subscription.topic_name}: the reader\'s program mark '
+                                         f'was not changed: {why}')
+        return
     with subscription.handle:
         apply_filter(subscription.handle.pointer, subscription.topic_name,
                      rate_filter.expression(), sql_expression=False)
@@ -251,11 +319,13 @@ def rate_filter_state(subscription: Subscription, node: Node) -> RateFilterState
     :param node: the subscription's node, whose graph tells which publishers filter.
     """
     rate_filter = _filter_of(subscription)
+    gids = [bytes(info.endpoint_gid)
+            for info in node.get_publishers_info_by_topic(subscription.topic_name)]
     if rate_filter.reason:
-        where = 'python'
+        mark = rate_filter.mark
+        where = 'writer' if mark is not None and mark.all_route(gids) else 'python'
     else:
-        known = [_rcl.writer_filters(bytes(info.endpoint_gid))
-                 for info in node.get_publishers_info_by_topic(subscription.topic_name)]
+        known = [_rcl.writer_filters(gid) for gid in gids]
         where = 'writer' if known and all(known) else 'reader' if False in known else 'unknown'
     verdicts = 0 if rate_filter.created is None else _rcl.filter_class_verdicts(
         rate_filter.created)

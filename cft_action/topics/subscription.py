@@ -27,6 +27,7 @@ from rclpy.subscription import Subscription
 from rclpy.type_support import check_is_valid_msg_type
 
 from cft_action.topics._filtered_reader import apply_filter, get_filter, has_filter, set_filter
+from cft_action.topics._program_mark import ProgramMark
 from cft_action.topics.message_types import first_primitive_field
 from cft_action._rclpy_compat import (declare_qos_parameters, new_rcl_subscription,
                                       register_subscription, validate_qos_or_depth,
@@ -191,13 +192,28 @@ def _subscribe_rate_limited(node: Node, msg_type, topic: str, callback: Callable
             reason = str(e)
     if reason:
         rate_filter.reason = reason
-        node.get_logger().info(
-            f'{topic}: max_rate and poll are applied in Python, to all publishers together, '
-            f'since the middleware cannot filter this subscription: {reason}', once=True)
         subscription = node.create_subscription(msg_type, topic, rate_filter.gate(callback),
                                                 qos_profile, **options)
+        _mark_rate_reader(node, subscription, rate_filter)
     rate.register(subscription, rate_filter)
     return subscription
+
+
+def _mark_rate_reader(node: Node, subscription: Subscription,
+                      rate_filter: rate.RateFilter) -> None:
+    """Where the rate class cannot filter ``subscription``'s reader: mark the reader so that guarded
+    Fast DDS 3.3+ publishers apply the rule (the callback's gate applies it to every publisher
+    anyway), and say once where the rule is applied."""
+    with subscription.handle:
+        pointer = subscription.handle.pointer
+    rate_filter.mark, refused = ProgramMark.install(
+        subscription.handle, pointer, _rcl.RATE_FILTER_CLASS, rate_filter.writer_expression())
+    node.get_logger().info(
+        f'{subscription.topic_name}: max_rate and poll are applied in this process (per '
+        'publisher where rclpy says which one sent a message), since its DDS reader cannot '
+        f'filter: {rate_filter.reason}; '
+        + ('publishers run under cft-action guard (Fast DDS 3.3+) apply them too'
+           if not refused else f'publishers do not: {refused}'), once=True)
 
 
 def subscribe_filtered(

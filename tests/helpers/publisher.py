@@ -14,6 +14,7 @@ Usage: ``python -m tests.helpers.publisher PREFIX [DEPTH]``: reliable, keep-last
   active T   replies ACTIVE A M: of the M matched subscriptions of topic T, A would take a
              message published now (cft_action.active_subscription_count)
   heartbeats replies HEARTBEATS {...}: cft_action.guard.heartbeat_counts() in this process
+  programs replies PROGRAMS {...}: cft_action.guard.program_counts() in this process
 """
 
 import json
@@ -81,6 +82,8 @@ def main() -> None:
                   f'{publisher.get_subscription_count()}', flush=True)
         elif command == 'heartbeats':
             print(f'HEARTBEATS {json.dumps(guard.heartbeat_counts())}', flush=True)
+        elif command == 'programs':
+            print(f'PROGRAMS {json.dumps(guard.program_counts())}', flush=True)
         elif command == 'steady':
             hz, seconds, base = argument.split()
             publisher, make = publishers['ints']

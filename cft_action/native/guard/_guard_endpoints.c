@@ -35,6 +35,7 @@
 #include "_guard_families.h"
 #include "_guard_feedback.h"
 #include "_guard_log.h"
+#include "_guard_programs.h"
 #include "_guard_replies.h"
 #include "_guard_status.h"
 #include "fastdds3/_prefilter.h"
@@ -53,6 +54,7 @@
 #define SERVICE_NAME "rcl_service_get_service_name"
 #define PUBLISHER_INIT "rcl_publisher_init"
 #define PUBLISH "rcl_publish"
+#define PUBLISHER_FINI "rcl_publisher_fini"
 #define PUBLISHER_RMW_HANDLE "rcl_publisher_get_rmw_handle"
 #define PUBLISHER_TOPIC "rcl_publisher_get_topic_name"
 #define RESPONSE_WRITER "_ZN16rmw_fastrtps_cpp23get_response_datawriterEP13rmw_service_s"
@@ -68,6 +70,7 @@ typedef int32_t (*init_fn)(void *endpoint, const void *node, const void *type_su
 typedef void *(*handle_fn)(const void *object);
 typedef const char *(*name_fn)(const void *object);
 typedef int32_t (*publish_fn)(const void *publisher, const void *message, void *allocation);
+typedef int32_t (*fini_fn)(void *endpoint, void *node);
 
 static struct {
   init_fn init;
@@ -75,6 +78,7 @@ static struct {
   name_fn name;
   init_fn publisher_init;
   publish_fn publish;
+  fini_fn publisher_fini;
   handle_fn publisher_rmw_handle;
   name_fn topic;
 } rcl;
@@ -93,6 +97,7 @@ static void resolve_rcl(void) {
   rcl.name = (name_fn)cft_guard_loaded_symbol(SERVICE_NAME, "librcl");
   rcl.publisher_init = (init_fn)cft_guard_loaded_symbol(PUBLISHER_INIT, "librcl");
   rcl.publish = (publish_fn)cft_guard_loaded_symbol(PUBLISH, "librcl");
+  rcl.publisher_fini = (fini_fn)cft_guard_loaded_symbol(PUBLISHER_FINI, "librcl");
   rcl.publisher_rmw_handle = (handle_fn)cft_guard_loaded_symbol(PUBLISHER_RMW_HANDLE, "librcl");
   rcl.topic = (name_fn)cft_guard_loaded_symbol(PUBLISHER_TOPIC, "librcl");
 }
@@ -105,6 +110,7 @@ static struct {
   cft_fastdds3_route_replies_fn route_replies;
   cft_fastdds3_route_marked_fn route_marked;
   cft_fastdds3_marked_readers_fn marked_readers;
+  cft_fastdds3_release_fn release;
   handle_fn response_writer;
   handle_fn datawriter;
 } layer;
@@ -153,10 +159,11 @@ static void load_layer(void) {
       layer.route_marked = (cft_fastdds3_route_marked_fn)dlsym(handle, CFT_FASTDDS3_ROUTE_MARKED);
       layer.marked_readers =
           (cft_fastdds3_marked_readers_fn)dlsym(handle, CFT_FASTDDS3_MARKED_READERS);
+      layer.release = (cft_fastdds3_release_fn)dlsym(handle, CFT_FASTDDS3_RELEASE);
       rtps_types = (cft_fastdds3_rtps_types_fn)dlsym(handle, CFT_FASTDDS3_RTPS_TYPES);
     }
     if (layer.route_replies == NULL || layer.route_marked == NULL ||
-        layer.marked_readers == NULL || rtps_types == NULL) {
+        layer.marked_readers == NULL || layer.release == NULL || rtps_types == NULL) {
       snprintf(why, sizeof why, "cannot load %.250s: %.150s", path, dlerror());
       layer.route_replies = NULL, layer.route_marked = NULL;
     }
@@ -216,45 +223,74 @@ int32_t rcl_service_init(void *service, const void *node, const void *type_suppo
   return init_endpoint(true, service, node, type_support, service_name, options);
 }
 
-// ---- routed publishers: an action's feedback and status -----------------------------------------
-// The routed publishers (rcl_publisher_t *, never read) with the layer's handle: a few per process
-// (two per action server); past ROUTED_MAX, a writer stays as rmw made it, said.
-#define ROUTED_MAX 64
+// ---- routed publishers --------------------------------------------------------------------------
+// The routed publishers (rcl_publisher_t *, never read) with the layer's handle, in a table
+// addressed by the publisher's address (linear probing): every publisher of a guarded process is
+// routed (the programs' kind takes any topic), and rcl_publish looks its own up at each write.
+// Past ROUTED_MAX - 1, a writer stays as rmw made it, said.
+#define ROUTED_MAX 1024
 static struct {
-  const void *publisher;
+  const void *publisher;  // NULL: a free slot
   void *routing;
 } routed[ROUTED_MAX];
 static int routed_count;
 static pthread_mutex_t routed_lock = PTHREAD_MUTEX_INITIALIZER;
 
+static size_t slot_of(const void *publisher) {
+  uintptr_t a = (uintptr_t)publisher;
+  return (size_t)((a >> 4) ^ (a >> 14)) % ROUTED_MAX;
+}
+
+// The slot of `publisher`, or of the free slot where it would go (under routed_lock).
+static size_t find_slot(const void *publisher) {
+  size_t i = slot_of(publisher);
+  while (routed[i].publisher != NULL && routed[i].publisher != publisher) i = (i + 1) % ROUTED_MAX;
+  return i;
+}
+
 // The routing of `publisher`, or NULL.
 static void *routing_of(const void *publisher) {
-  void *routing = NULL;
   pthread_mutex_lock(&routed_lock);
-  for (int i = 0; i < routed_count && routing == NULL; i++)
-    if (routed[i].publisher == publisher) routing = routed[i].routing;
+  void *routing = routed[find_slot(publisher)].routing;
   pthread_mutex_unlock(&routed_lock);
   return routing;
 }
 
-// `publisher` is (routing != NULL) or is no longer (NULL) a routed feedback publisher: an address
-// that rcl reuses for another publisher forgets the routing of the one before.
+// Empties slot `i` and moves back the entries after it that it would hide (under routed_lock).
+static void free_slot(size_t i) {
+  routed[i].publisher = NULL, routed[i].routing = NULL;
+  for (size_t j = (i + 1) % ROUTED_MAX; routed[j].publisher != NULL; j = (j + 1) % ROUTED_MAX) {
+    size_t home = slot_of(routed[j].publisher);
+    // j's entry stays where it is if its home lies cyclically in (i, j]
+    if (i <= j ? (i < home && home <= j) : (i < home || home <= j)) continue;
+    routed[i] = routed[j];
+    routed[j].publisher = NULL, routed[j].routing = NULL;
+    i = j;
+  }
+}
+
+// `publisher` is (routing != NULL) or is no longer (NULL) a routed publisher; the routing it had
+// before, if any, goes to the layer's release (an address that rcl reuses for another publisher
+// forgets the routing of the one before).
 static bool set_routing(const void *publisher, void *routing) {
   bool stored = routing == NULL;
+  void *before = NULL;
   pthread_mutex_lock(&routed_lock);
-  // routed_count is read without the lock too (rcl_publish's quick test): stored atomically.
-  for (int i = 0; i < routed_count; i++) {
-    if (routed[i].publisher != publisher) continue;
-    routed[i] = routed[routed_count - 1];
+  size_t i = find_slot(publisher);
+  if (routed[i].publisher != NULL) {
+    before = routed[i].routing;
+    free_slot(i);
+    // routed_count is read without the lock too (rcl_publish's quick test): stored atomically.
     __atomic_store_n(&routed_count, routed_count - 1, __ATOMIC_RELEASE);
-    break;  // a publisher is stored once
+    i = find_slot(publisher);
   }
-  if (routing != NULL && routed_count < ROUTED_MAX) {
-    routed[routed_count].publisher = publisher, routed[routed_count].routing = routing;
+  if (routing != NULL && routed_count < ROUTED_MAX - 1) {
+    routed[i].publisher = publisher, routed[i].routing = routing;
     __atomic_store_n(&routed_count, routed_count + 1, __ATOMIC_RELEASE);
     stored = true;
   }
   pthread_mutex_unlock(&routed_lock);
+  if (before != NULL) layer.release(before);
   return stored;
 }
 
@@ -265,9 +301,15 @@ static int feedback_judge(void **state, const uint8_t *data, uint32_t length,
   return cft_feedback_verdict(data, length, reader);
 }
 static const struct cft_marked_verdict feedback_verdict = {feedback_judge, NULL,
-                                                           cft_write_passes_unjudged};
+                                                           cft_write_passes_unjudged, NULL, 0};
 static const struct cft_marked_verdict status_verdict = {cft_status_judge, cft_status_forget,
-                                                         cft_write_passes_unjudged};
+                                                         cft_write_passes_unjudged, NULL, 0};
+// A writer with no program-marked reader looks at its readers every PROGRAM_LOOKUP_MS at most: a
+// reader not known yet passes, and its own process decides (it does so for every sample anyway).
+#define PROGRAM_LOOKUP_MS 50
+static const struct cft_marked_verdict program_verdict = {
+    cft_program_judge, cft_program_forget, cft_write_passes_unjudged, cft_program_update,
+    PROGRAM_LOOKUP_MS};
 static const struct routed_kind {
   const char *what;
   const struct cft_marked_verdict *verdict;
@@ -282,11 +324,15 @@ static const struct routed_kind {
    cft_feedback_writer_routed, NULL, NULL},
   {"status", &status_verdict, CFT_STATUS_READER_MARK, cft_status_is_topic, cft_status_unroutable,
    cft_status_reader_kept, cft_status_heartbeat_ms, cft_status_heartbeat_set},
+  {"samples", &program_verdict, CFT_PROGRAM_READER_MARK, cft_programs_is_topic,
+   cft_programs_unroutable, cft_programs_writer_routed, NULL, NULL},
 };
 #define KINDS ((int)(sizeof kinds / sizeof kinds[0]))
 
+static bool program_failure_said;
+
 // `publisher`, of `topic`, one of `kind`'s, in a process of Fast DDS 3, gets its samples routed,
-// or says once why not.
+// or says why not (once, for the programs' kind).
 static void route(const void *publisher, const char *topic, int kind) {
   const struct routed_kind *k = &kinds[kind];
   const char *unroutable = k->unroutable();
@@ -306,22 +352,28 @@ static void route(const void *publisher, const char *topic, int kind) {
   if (routing != NULL && set_routing(publisher, routing)) {
     k->routed();
     if (heartbeat_ms > 0) k->heartbeat_set();
-  } else {
-    cft_say("the %s of %.200s goes to every client: %s (%d)", k->what, topic,
+  } else if (k->verdict != &program_verdict || cft_first(&program_failure_said)) {
+    cft_say("the %s of %.200s goes to every reader: %s (%d)%s", k->what, topic,
             writer == NULL ? "it has no rmw_fastrtps_cpp writer"
             : routing == NULL ? "its DataWriter refused the prefilter or the mark"
-                              : "too many routed publishers", (int)error);
+                              : "too many routed publishers", (int)error,
+            k->verdict == &program_verdict ? " (said once for all publishers)" : "");
   }
 }
 
-// A publisher that rcl made: an action's feedback or status publisher, in a process of Fast DDS
-// 3, gets its samples routed.
+// A publisher that rcl made, in a process of Fast DDS 3, gets its samples routed: an action's
+// feedback or status publisher to the readers that ask for their own goals', any other to the
+// readers that mark a program.
 static void publisher_created(const void *publisher) {
   if (__atomic_load_n(&routed_count, __ATOMIC_ACQUIRE) > 0) set_routing(publisher, NULL);
   if (rcl.topic == NULL || rcl.publisher_rmw_handle == NULL) return;
   const char *topic = rcl.topic(publisher);
-  for (int kind = 0; kind < KINDS; kind++)
-    if (kinds[kind].is_topic(topic) && cft_loaded_family() == 1) route(publisher, topic, kind);
+  for (int kind = 0; kind < KINDS; kind++) {
+    if (kinds[kind].is_topic(topic) && cft_loaded_family() == 1) {
+      route(publisher, topic, kind);
+      return;  // a writer has one prefilter
+    }
+  }
 }
 
 CFT_EXPORT int32_t rcl_publisher_init(void *publisher, const void *node, const void *type_support,
@@ -329,6 +381,15 @@ CFT_EXPORT int32_t rcl_publisher_init(void *publisher, const void *node, const v
 int32_t rcl_publisher_init(void *publisher, const void *node, const void *type_support,
                            const char *topic_name, const void *options) {
   return init_endpoint(false, publisher, node, type_support, topic_name, options);
+}
+
+// A publisher that rcl destroys gives its routing back to the layer.
+CFT_EXPORT int32_t rcl_publisher_fini(void *publisher, void *node);
+int32_t rcl_publisher_fini(void *publisher, void *node) {
+  pthread_once(&rcl_once, resolve_rcl);
+  if (rcl.publisher_fini == NULL) return missing(PUBLISHER_FINI);
+  if (__atomic_load_n(&routed_count, __ATOMIC_ACQUIRE) > 0) set_routing(publisher, NULL);
+  return rcl.publisher_fini(publisher, node);
 }
 
 // Before a write of a routed publisher, on the publishing thread, outside Fast DDS: the

@@ -42,3 +42,4 @@ CFT_EXPORT const char *cft_fastdds3_layer_refused(void) {
 CFT_EXPORT const char *cft_fastdds3_reader_mark(void) { return CFT_READER_MARK; }
 CFT_EXPORT const char *cft_fastdds3_status_reader_mark(void) { return CFT_STATUS_READER_MARK; }
 CFT_EXPORT const char *cft_fastdds3_writer_mark(void) { return CFT_WRITER_MARK; }
+CFT_EXPORT const char *cft_fastdds3_program_mark(void) { return CFT_PROGRAM_READER_MARK; }

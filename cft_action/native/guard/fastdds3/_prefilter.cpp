@@ -26,6 +26,7 @@
 #include "_bytes.hpp"
 #include "_fastdds3_user_data.hpp"
 
+#include <atomic>
 #include <chrono>
 #include <cstring>
 #include <exception>
@@ -72,12 +73,12 @@ class ReplyRouting final : public IContentFilter {
   const cft_reply_verdict_fn verdict_;
 };
 
-// An action's feedback or status writer: each sample to every reader, except that a reader whose
-// discovery data carries the reader mark gets only what the verdict does not refuse, judged with
-// that reader's state. Which readers carry it is learnt outside the prefilter (readers()), never
-// inside it: evaluate runs under the writer's mutex, and DataWriter::get_matched_subscription_data
-// takes the participant's discovery lock, which the discovery thread holds when it takes writers'
-// mutexes. A reader not known yet passes.
+// An action's feedback or status writer, or any writer whose readers mark a program: each sample
+// to every reader, except that a reader whose discovery data carries the reader mark gets only what
+// the verdict does not refuse, judged with that reader's state. Which readers carry it is learnt
+// outside the prefilter (readers()), never inside it: evaluate runs under the writer's mutex, and
+// DataWriter::get_matched_subscription_data takes the participant's discovery lock, which the
+// discovery thread holds when it takes writers' mutexes. A reader not known yet passes.
 class MarkedRouting final : public IContentFilter {
  public:
   MarkedRouting(const cft_marked_verdict *verdict, const char *reader_mark)
@@ -91,7 +92,7 @@ class MarkedRouting final : public IContentFilter {
                 const GUID_t &reader_guid) const override {
     std::lock_guard<std::mutex> lock(mutex_);
     auto found = readers_.find(reader_guid);
-    if (found == readers_.end() || !found->second.marked) {
+    if (found == readers_.end() || !found->second.judged) {
       if (verdict_.unjudged != nullptr) verdict_.unjudged();
       return true;
     }
@@ -101,23 +102,28 @@ class MarkedRouting final : public IContentFilter {
   }
 
   // The readers `writer` matches, each marked or not; only those new since the last call are
-  // looked up, unless every one is due again. Returns how many are marked. At nearly every write
-  // nothing changed: then the knowledge is only compared.
+  // looked up, unless every one is due again. Returns how many are judged. At nearly every write
+  // nothing changed: then the knowledge is only compared (or, with the verdict's lookup_ms, not
+  // even that until it is due).
   // One caller at a time (a writer may publish from several threads); another meanwhile returns
   // -1 at once: the running one brings the knowledge up to date.
   int32_t readers(DataWriter &writer) {
     std::unique_lock<std::mutex> reading(reading_, std::try_to_lock);
     if (!reading.owns_lock()) return -1;
-    if (writer.get_matched_subscriptions(handles_) != RETCODE_OK) return -1;
     Clock::time_point now = Clock::now();
+    if (verdict_.lookup_ms > 0) {
+      if (now - looked_at_ < std::chrono::milliseconds(verdict_.lookup_ms)) return judged_count_;
+      looked_at_ = now;
+    }
+    if (writer.get_matched_subscriptions(handles_) != RETCODE_OK) return -1;
     bool all = now - read_at_ >= std::chrono::milliseconds(CFT_FASTDDS3_REREAD_MS);
-    std::map<GUID_t, bool> known;  // the marks known now
+    std::map<GUID_t, Mark> known;  // the marks known now
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (!all && knows_all()) return marked_count_;
-      for (const auto &reader : readers_) known.emplace(reader.first, reader.second.marked);
+      if (!all && knows_all()) return judged_count_;
+      for (const auto &reader : readers_) known.emplace(reader.first, reader.second.mark);
     }
-    std::map<GUID_t, bool> fresh;
+    std::map<GUID_t, Mark> fresh;
     SubscriptionBuiltinTopicData data;
     for (const InstanceHandle_t &handle : handles_) {
       GUID_t guid = eprosima::fastdds::rtps::iHandle2GUID(handle);
@@ -125,7 +131,7 @@ class MarkedRouting final : public IContentFilter {
       if (!all && found != known.end()) {
         fresh.emplace(guid, found->second);
       } else if (writer.get_matched_subscription_data(data, handle) == RETCODE_OK) {
-        fresh.emplace(guid, cft_action::user_data_holds(data.user_data.data_vec(), mark_.c_str()));
+        fresh.emplace(guid, mark_of(data.user_data.data_vec()));
       }  // else: unmatched meanwhile, or not known to discovery: not known (passes)
     }
     if (all) read_at_ = now;
@@ -135,22 +141,45 @@ class MarkedRouting final : public IContentFilter {
     std::lock_guard<std::mutex> lock(mutex_);
     for (const auto &mark : fresh) {
       Reader &reader = next[mark.first];
-      reader.marked = mark.second;
+      reader.mark = mark.second;
+      if (!reader.mark.present) continue;
       auto before = readers_.find(mark.first);
-      if (before != readers_.end() && mark.second) std::swap(reader.state, before->second.state);
-      count += mark.second;
+      bool had = before != readers_.end() && before->second.mark.present;
+      if (had) std::swap(reader.state, before->second.state);
+      if (verdict_.update == nullptr)
+        reader.judged = true;
+      else if (had && before->second.mark.value == reader.mark.value)
+        reader.judged = before->second.judged;
+      else
+        reader.judged = verdict_.update(&reader.state, reader.mark.value.data(),
+                                        static_cast<uint32_t>(reader.mark.value.size())) != 0;
+      count += reader.judged;
     }
     for (auto &gone : readers_) forget(gone.second);
     readers_.swap(next);
-    marked_count_ = count;
+    judged_count_ = count;
     return count;
   }
 
  private:
+  struct Mark {
+    bool present = false;
+    std::string value;  // the program, for a verdict with update
+  };
   struct Reader {
-    bool marked = false;
+    Mark mark;
+    bool judged = false;    // its samples are judged: marked, and its program (if any) taken
     void *state = nullptr;  // the verdict's, for a marked reader
   };
+
+  Mark mark_of(const std::vector<eprosima::fastdds::rtps::octet> &user_data) const {
+    Mark mark;
+    if (verdict_.update == nullptr)
+      mark.present = cft_action::user_data_holds(user_data, mark_.c_str());
+    else
+      mark.present = cft_action::user_data_value(user_data, mark_.c_str(), &mark.value);
+    return mark;
+  }
 
   void forget(Reader &reader) const {
     if (reader.state != nullptr && verdict_.forget != nullptr) verdict_.forget(reader.state);
@@ -169,10 +198,11 @@ class MarkedRouting final : public IContentFilter {
   const std::string mark_;
   mutable std::mutex mutex_;                 // held by each verdict
   mutable std::map<GUID_t, Reader> readers_;  // under mutex_
-  int32_t marked_count_ = 0;                 // readers_'s marked readers (under mutex_)
+  std::atomic<int32_t> judged_count_{0};     // readers_'s judged readers
   std::mutex reading_;                       // held by readers()
   std::vector<InstanceHandle_t> handles_;    // the last reading's (under reading_)
   Clock::time_point read_at_;                // the readers' last full reading (under reading_)
+  Clock::time_point looked_at_;              // the last look, with lookup_ms (under reading_)
 };
 
 // Whether a reliable writer's `qos` had a heartbeat period longer than `ms` (> 0), now `ms`.
@@ -199,7 +229,8 @@ extern "C" __attribute__((visibility("default"))) int32_t cft_fastdds3_route_rep
 }
 
 // The handle is a MarkedRouting that the writer shares (its prefilter): it lives as long as the
-// guard keeps the handle, which it does for the process's life (two per action server).
+// guard keeps the handle (until its publisher is destroyed: cft_fastdds3_release) or the writer
+// keeps the prefilter.
 extern "C" __attribute__((visibility("default"))) void *cft_fastdds3_route_marked(
     void *datawriter, const cft_marked_verdict *verdict, const char *reader_mark,
     const char *writer_mark, int32_t *heartbeat_ms, int32_t *error) {
@@ -231,4 +262,8 @@ extern "C" __attribute__((visibility("default"))) int32_t cft_fastdds3_marked_re
   } catch (const std::exception &) {  // no memory: what was known stays
     return -1;
   }
+}
+
+extern "C" __attribute__((visibility("default"))) void cft_fastdds3_release(void *handle) {
+  delete static_cast<std::shared_ptr<MarkedRouting> *>(handle);
 }

@@ -23,16 +23,23 @@ typedef int (*cft_reply_verdict_fn)(const uint8_t *related, int32_t high, uint32
 typedef int32_t (*cft_fastdds3_route_replies_fn)(void *datawriter, cft_reply_verdict_fn verdict);
 
 // The guard's decision for a sample of a writer routed to marked readers (an action's feedback or
-// status writer): 0 when the sample (`data`, `length` bytes, encapsulation included) must not go to
-// `reader` (16 bytes), a reader whose USER_DATA holds the routing's reader mark. *state is that
-// reader's own (NULL at first), which `judge` may set; the layer gives it to `forget` (if not NULL)
-// when the reader goes or loses its mark. Called with the routing's lock held, one at a time, as
-// is `unjudged` (if not NULL) for each sample and reader passed without asking `judge` (not
-// marked, or not known yet).
+// status writer, or any writer whose readers mark a program): 0 when the sample (`data`, `length`
+// bytes, encapsulation included) must not go to `reader` (16 bytes), a reader whose USER_DATA holds
+// the routing's reader mark. *state is that reader's own (NULL at first), which `judge` may set;
+// the layer gives it to `forget` (if not NULL) when the reader goes or loses its mark. Called with
+// the routing's lock held, one at a time, as is `unjudged` (if not NULL) for each sample and reader
+// passed without asking `judge` (not marked, or not known yet).
+// With `update` (not NULL) the reader mark is a prefix, and the mark's value (the text after it, up
+// to its ';') is the reader's program: `update` is given each new value (`length` bytes, no NUL)
+// with the reader's *state, which it replaces; 0 refuses the value (the reader is then passed
+// every sample, unjudged). `lookup_ms` > 0: the matched readers are looked up at most that often
+// (a reader not known yet passes).
 struct cft_marked_verdict {
   int (*judge)(void **state, const uint8_t *data, uint32_t length, const uint8_t *reader);
   void (*forget)(void *state);
   void (*unjudged)(void);
+  int (*update)(void **state, const char *value, uint32_t length);
+  int32_t lookup_ms;
 };
 
 // Gives `datawriter` a sample prefilter that asks `verdict` for the readers whose USER_DATA holds
@@ -51,12 +58,18 @@ typedef void *(*cft_fastdds3_route_marked_fn)(void *datawriter,
 // Brings the routing `handle`'s knowledge of which readers are marked up to date with the
 // discovery data of `datawriter` (its writer): the readers matched since the last call, and every
 // reader again when CFT_FASTDDS3_REREAD_MS have passed since the last full reading (a reader's
-// USER_DATA can change after it matched). To be called outside any Fast DDS lock and callback
+// USER_DATA can change after it matched); with the verdict's `lookup_ms`, not more often. To be
+// called outside any Fast DDS lock and callback
 // (DataWriter::get_matched_subscription_data takes the participant's discovery lock): the guard
 // calls it before each write of the writer (rcl_publish). Returns the marked readers' count.
 #define CFT_FASTDDS3_MARKED_READERS "cft_fastdds3_marked_readers"
 #define CFT_FASTDDS3_REREAD_MS 200
 typedef int32_t (*cft_fastdds3_marked_readers_fn)(void *handle, void *datawriter);
+
+// Gives back a routing's handle (its publisher is destroyed): the writer, if it still lives, keeps
+// the routing.
+#define CFT_FASTDDS3_RELEASE "cft_fastdds3_release"
+typedef void (*cft_fastdds3_release_fn)(void *handle);
 
 #ifdef __cplusplus
 }
