@@ -127,8 +127,10 @@ static bool passes(struct program *p, const uint8_t *data, uint32_t length) {
 int cft_program_judge(void **state, const uint8_t *data, uint32_t length, const uint8_t *reader) {
   (void)reader;
   count(VERDICTS);
-  // Fast DDS's own treatment of a withheld sample (a GAP), as for a content filter on 2.14.
-  cft_write_judged(CFT_OTHER_READER);
+  // The write's frame (_guard_status.h) learns that it asked a routed reader: _guard_heartbeats.c
+  // then keeps Fast DDS 3's HEARTBEAT with the DATA and leaves the reader's GAP for its next DATA
+  // (in whose datagram it rides when that DATA goes to that reader alone), as for feedback.
+  cft_write_judged(CFT_KEPT_READER);
   bool passed = passes(*state, data, length);
   if (!passed) count(WITHHELD);
   return cft_write_passes(passed);

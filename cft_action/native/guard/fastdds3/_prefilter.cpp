@@ -102,7 +102,7 @@ class MarkedRouting final : public IContentFilter {
   }
 
   // The readers `writer` matches, each marked or not; only those new since the last call are
-  // looked up, unless every one is due again. Returns how many are judged. At nearly every write
+  // looked up (and, with the verdict's update, the marked ones), unless every one is due again. Returns how many are judged. At nearly every write
   // nothing changed: then the knowledge is only compared (or, with the verdict's lookup_ms, not
   // even that until it is due).
   // One caller at a time (a writer may publish from several threads); another meanwhile returns
@@ -120,7 +120,9 @@ class MarkedRouting final : public IContentFilter {
     std::map<GUID_t, Mark> known;  // the marks known now
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      if (!all && knows_all()) return judged_count_;
+      // A program changes with its mark (a poll): with update, a marked reader is read at each look.
+      if (!all && knows_all() && (verdict_.update == nullptr || judged_count_ == 0))
+        return judged_count_;
       for (const auto &reader : readers_) known.emplace(reader.first, reader.second.mark);
     }
     std::map<GUID_t, Mark> fresh;
@@ -128,7 +130,8 @@ class MarkedRouting final : public IContentFilter {
     for (const InstanceHandle_t &handle : handles_) {
       GUID_t guid = eprosima::fastdds::rtps::iHandle2GUID(handle);
       auto found = known.find(guid);
-      if (!all && found != known.end()) {
+      bool again = found != known.end() && verdict_.update != nullptr && found->second.present;
+      if (!all && found != known.end() && !again) {
         fresh.emplace(guid, found->second);
       } else if (writer.get_matched_subscription_data(data, handle) == RETCODE_OK) {
         fresh.emplace(guid, mark_of(data.user_data.data_vec()));

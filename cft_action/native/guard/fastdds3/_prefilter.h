@@ -58,7 +58,8 @@ typedef void *(*cft_fastdds3_route_marked_fn)(void *datawriter,
 // Brings the routing `handle`'s knowledge of which readers are marked up to date with the
 // discovery data of `datawriter` (its writer): the readers matched since the last call, and every
 // reader again when CFT_FASTDDS3_REREAD_MS have passed since the last full reading (a reader's
-// USER_DATA can change after it matched); with the verdict's `lookup_ms`, not more often. To be
+// USER_DATA can change after it matched), and, with the verdict's `update`, each marked reader again
+// (its program changes with its mark); with the verdict's `lookup_ms`, not more often. To be
 // called outside any Fast DDS lock and callback
 // (DataWriter::get_matched_subscription_data takes the participant's discovery lock): the guard
 // calls it before each write of the writer (rcl_publish). Returns the marked readers' count.
