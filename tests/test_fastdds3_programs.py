@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import pytest
 
-from cft_action import guard, rate_filter_state
+from cft_action import _rcl, guard, rate_filter_state
 from cft_action.parameters.parameter_events import ParameterEventHandler
 from harness.proc import stop_all
 from harness.ros import unique_name
@@ -16,7 +16,7 @@ from tests.test_fastdds3 import _fast_dds_3
 from tests.test_fastdds3_replies import MISSING
 from tests.test_parameter_events import BURST, burst, Recorder
 # The lifted rate runs here as on Jazzy: the lifted program reaches the guarded writers.
-from tests.test_rate_limit import (max_rate_run, runs, SOURCE_HZ,  # noqa: F401
+from tests.test_rate_limit import (max_rate_run, publish, QOS, runs, SOURCE_HZ,  # noqa: F401
                                    test_max_rate_can_be_lifted_at_run_time, three_polls)
 
 pytestmark = pytest.mark.skipif(not _fast_dds_3(), reason="a Fast DDS 3 stack (Kilted's wheels)")
@@ -97,3 +97,22 @@ def test_parameter_events_of_unwatched_nodes_stay_in_guarded_nodes(ros):
         handler.destroy()
     finally:
         stop_all([guarded, plain])
+
+
+@pytest.mark.skipif(not ROUTED, reason=MISSING or '')
+def test_a_mark_outside_the_grammars_is_refused_and_gets_every_sample(ros, runs):  # noqa: F811
+    """A reader whose program mark no class compiles (as any participant may send): the guarded
+    publishers refuse it, count it, and send that reader every sample, as an unguarded one."""
+    from std_msgs.msg import Int32
+    topic, children = runs['guarded']
+    received = []
+    subscription = ros.node.create_subscription(Int32, topic, lambda m: received.append(m.data),
+                                                QOS)
+    with subscription.handle:
+        assert _rcl.mark_reader_program(subscription.handle.pointer, _rcl.RATE_FILTER_CLASS,
+                                        'period=fast') == ''
+    publish(ros, 1, children)
+    ros.spin_for(0.5)
+    assert len(received) >= 0.9 * SOURCE_HZ * len(children), len(received)
+    for counts in program_counts(children):
+        assert counts['refused'] >= 1 and counts['withheld'] == 0, counts

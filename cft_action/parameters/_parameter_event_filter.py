@@ -343,12 +343,10 @@ class ParameterEventFilter:
         start = time.monotonic()
         if not self._gate.wait(target, timeout_sec):
             return False
-        if self._mark is not None:  # the writers read the arrived mark at their next write
-            left = REREAD_S if timeout_sec is None else min(
-                REREAD_S, timeout_sec - (time.monotonic() - start))
-            if left < REREAD_S:
+        if self._mark is not None:  # the writers read an arrived mark at a write within REREAD_S
+            if timeout_sec is not None and timeout_sec - (time.monotonic() - start) < REREAD_S:
                 return False
-            time.sleep(left)
+            time.sleep(REREAD_S)
         with self.reader.lock:
             if self.reader.ended or self._version() != target:
                 return False
