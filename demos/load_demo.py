@@ -40,6 +40,7 @@ from typing import Optional, Sequence
 from harness import load
 from harness.cli import add_server_feedback_depth
 from harness.machine import environment_facts
+from harness.proc import add_cpu_arguments
 
 #: rclpy's default feedback depth (``ActionServer``'s ``feedback_pub_qos_profile``, keep-last 10).
 RCLPY_FEEDBACK_DEPTH = 10
@@ -73,6 +74,7 @@ def parse_args(argv: Optional[Sequence[str]]) -> argparse.Namespace:
                         help='directory for load_demo.png and load_demo.json')
     parser.add_argument('--no-plot', action='store_true', help='skip the PNG')
     add_server_feedback_depth(parser, default=RCLPY_FEEDBACK_DEPTH)
+    add_cpu_arguments(parser)
     args = parser.parse_args(argv)
     args.configs = [c.strip() for c in args.configs.split(',') if c.strip()]
     args.unguarded = [c.strip() for c in args.unguarded.split(',') if c.strip()]
@@ -92,7 +94,8 @@ def main(argv: Optional[Sequence[str]] = None) -> int:
 
     spec = load.LoadSpec(clients=args.clients, goals=args.goals, order=args.order,
                          rate_hz=args.rate, pad=args.pad, network=args.network,
-                         server_feedback_depth=args.server_feedback_depth)
+                         server_feedback_depth=args.server_feedback_depth,
+                         server_cpus=args.server_cpus, client_cpus=args.client_cpus)
     progress(f'load: {spec.clients} client processes x {spec.goals} goals, {spec.order} '
              f'feedback messages per goal at {spec.rate_hz:g} Hz; configurations: '
              + ', '.join(load.CONFIG_LABELS[c] for c in args.configs))

@@ -3,9 +3,9 @@
 // libFuzzer harness of a guarded writer's program verdict on Fast DDS 3.3+
 // (cft_action/native/guard/_guard_programs.c): a remote reader's program mark (the value after
 // CFT_PROGRAM_READER_MARK in its discovery data's USER_DATA, as fastdds3/_prefilter.cpp hands it
-// over: "<class> <expression>", not NUL-ended, any bytes), replaced as the reader changes it, and the
-// verdicts on the writer's serialized samples for that reader (parameter events, or any sample for
-// a rate program). Input: items, each a byte (even: a mark value follows; odd: a sample) and a
+// over: "<class> <expression>", not NUL-ended, any bytes), replaced as the reader changes it, and
+// the verdicts on the writer's serialized samples for that reader (parameter events, or any sample
+// for a rate program). Input: items, each a byte (even: a mark value follows; odd: a sample) and a
 // 2-byte little-endian length with that many bytes; at most 64 items.
 #include <stdlib.h>
 

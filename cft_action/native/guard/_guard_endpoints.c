@@ -17,10 +17,15 @@
 // - Fast DDS 2.14 marks its reply writers itself, from the readers they match (_guard_replies.c),
 //   and nothing is done here.
 // Where the layer cannot be used (not built, another Fast DDS, another rmw), every reply goes to
-// every client as rmw_fastrtps sends it, and the first action service says once why
+// every client as rmw_fastrtps sends it, and the first endpoint that would use it says once why
 // (cft_guard_prefilter_state too). rcl's definitions are found in the loaded librcl (ROS loads it
 // in a local scope: RTLD_NEXT does not see it). CFT_GUARD_REPLIES=off (or 0) leaves every service
 // as rcl made it.
+// It defines rcl_publisher_init, rcl_publish and rcl_publisher_fini too: on Fast DDS 3.3+ an
+// action's feedback and status writers get routings to the readers that mark themselves
+// (_guard_feedback.c, _guard_status.c), every other writer one to readers that mark a program
+// (_guard_programs.c); rcl_publish brings a routing's knowledge of the marks up to date before each
+// write, and rcl_publisher_fini gives the routing back.
 
 #define _GNU_SOURCE
 #include <dlfcn.h>

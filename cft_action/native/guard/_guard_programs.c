@@ -72,9 +72,9 @@ static int refused(const char *value, uint32_t length) {
   if (cft_first(&said)) {
     char text[64];
     shown(text, sizeof text, value, length);
-    cft_say("a reader marked a program outside %s's and %s's grammars: it gets every sample (\"%s\"; "
-            "said once, cft_guard_program_count counts each)", CFT_RATE_CLASS, CFT_NODE_CLASS,
-            text);
+    cft_say("a reader marked a program outside %s's and %s's grammars: it gets every sample "
+            "(\"%s\"; said once, cft_guard_program_count counts each)", CFT_RATE_CLASS,
+            CFT_NODE_CLASS, text);
   }
   return 0;
 }
@@ -145,7 +145,7 @@ void cft_program_forget(void *state) {
 
 void cft_programs_writer_routed(void) { count(WRITERS); }
 
-// ---- the C API, for ctypes -----------------------------------------------------------------------
+// ---- the C API, for ctypes ----------------------------------------------------------------------
 // 0: writers given the verdict; 1: verdicts (for marked readers); 2: withheld; 3: marks refused;
 // 4: events passed whose node could not be read.
 CFT_EXPORT unsigned long cft_guard_program_count(int which) {

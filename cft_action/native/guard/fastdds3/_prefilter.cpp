@@ -3,9 +3,9 @@
 // The server guard's Fast DDS 3 layer: the guard's per-reader decisions, given to a Fast DDS 3.3+
 // writer through its public API. It decides nothing itself: which reader gets which sample is the
 // family-free parts' (_guard_replies.c's cft_reply_verdict, _guard_feedback.c's
-// cft_feedback_verdict, _guard_status.c's cft_status_judge, passed in); this file only carries
-// their answer to Fast DDS, and tells the verdicts which readers asked for them (their USER_DATA,
-// read outside the prefilter), with each such reader's state.
+// cft_feedback_verdict, _guard_status.c's cft_status_judge, _guard_programs.c's cft_program_judge,
+// passed in); this file only carries their answer to Fast DDS, and tells the verdicts which readers
+// asked for them (their USER_DATA, read outside the prefilter), with each such reader's state.
 //
 // It stands on `DataWriter::set_sample_prefilter(std::shared_ptr<IContentFilter>)` (Fast DDS 3.3+,
 // fastdds/dds/publisher/DataWriter.hpp): the writer asks the prefilter, in
@@ -102,9 +102,9 @@ class MarkedRouting final : public IContentFilter {
   }
 
   // The readers `writer` matches, each marked or not; only those new since the last call are
-  // looked up (and, with the verdict's update, the marked ones), unless every one is due again. Returns how many are judged. At nearly every write
-  // nothing changed: then the knowledge is only compared (or, with the verdict's lookup_ms, not
-  // even that until it is due).
+  // looked up (and, with the verdict's update, the marked ones), unless every one is due again.
+  // Returns how many are judged. At nearly every write nothing changed: then the knowledge is only
+  // compared (or, with the verdict's lookup_ms, not even that until it is due).
   // One caller at a time (a writer may publish from several threads); another meanwhile returns
   // -1 at once: the running one brings the knowledge up to date.
   int32_t readers(DataWriter &writer) {
@@ -120,7 +120,7 @@ class MarkedRouting final : public IContentFilter {
     std::map<GUID_t, Mark> known;  // the marks known now
     {
       std::lock_guard<std::mutex> lock(mutex_);
-      // A program changes with its mark (a poll): with update, a marked reader is read at each look.
+      // A program changes with its mark (a poll): with update, marked readers are read each look.
       if (!all && knows_all() && (verdict_.update == nullptr || judged_count_ == 0))
         return judged_count_;
       for (const auto &reader : readers_) known.emplace(reader.first, reader.second.mark);
