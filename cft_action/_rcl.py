@@ -542,19 +542,26 @@ def _datareader(subscription_ptr: int) -> Optional[int]:
     return _fastdds3_layer().datareader(rmw_subscription) if rmw_subscription else None
 
 
+def _layer_reader(subscription_ptr: int) -> tuple[Optional[int], str]:
+    """The subscription's DataReader where the client's Fast DDS 3 layer may mark it, else None
+    and why not."""
+    layer = _fastdds3_layer()
+    if layer.reason:
+        return None, f"the client's Fast DDS 3 layer is off: {layer.reason}"
+    reader = _datareader(subscription_ptr)
+    return (reader, '') if reader else (None, 'the subscription has no rmw_fastrtps_cpp DataReader')
+
+
 def mark_own_goals_reader(subscription_ptr: int, status: bool = False) -> str:
     """Ask a guarded Fast DDS 3.3+ server for this feedback reader's own goals' feedback only, or
     (``status``) this status reader's own goals' status changes only: the reader's USER_DATA gets
     the reader mark (native/_filter_class.h, CFT_READER_MARK or CFT_STATUS_READER_MARK;
     DataReader::set_qos). Return why not, or ``''``."""
-    layer = _fastdds3_layer()
-    if layer.reason:
-        return f"the client's Fast DDS 3 layer is off: {layer.reason}"
-    reader = _datareader(subscription_ptr)
+    reader, why = _layer_reader(subscription_ptr)
     if not reader:
-        return 'the subscription has no rmw_fastrtps_cpp DataReader'
+        return why
     mark = _lib.cft_fastdds3_status_reader_mark() if status else _lib.cft_fastdds3_reader_mark()
-    ret = layer.mark_reader(reader, mark)
+    ret = _fastdds3_layer().mark_reader(reader, mark)
     return f'DataReader::set_qos returned {ret}' if ret != 0 else ''
 
 
@@ -576,17 +583,14 @@ def mark_reader_program(subscription_ptr: int, filter_class: str, expression: st
     USER_DATA's program mark (native/_filter_class.h, CFT_PROGRAM_READER_MARK) becomes it
     (DataReader::set_qos; the writers read it within CFT_FASTDDS3_REREAD_MS). Return why not, or
     ``''``."""
-    layer = _fastdds3_layer()
-    if layer.reason:
-        return f"the client's Fast DDS 3 layer is off: {layer.reason}"
+    reader, why = _layer_reader(subscription_ptr)
+    if not reader:
+        return why
     if ';' in expression:
         return f'the program {expression!r} holds a ";", which ends a mark'
-    reader = _datareader(subscription_ptr)
-    if not reader:
-        return 'the subscription has no rmw_fastrtps_cpp DataReader'
     prefix = _lib.cft_fastdds3_program_mark()
     mark = prefix + f'{filter_class} {expression};'.encode()
-    ret = layer.mark_program(reader, prefix, mark)
+    ret = _fastdds3_layer().mark_program(reader, prefix, mark)
     return f'DataReader::set_qos returned {ret}' if ret != 0 else ''
 
 

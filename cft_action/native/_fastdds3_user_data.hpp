@@ -34,15 +34,22 @@ inline bool user_data_value(const std::vector<eprosima::fastdds::rtps::octet> &d
   return true;
 }
 
-// `mark` appended to the USER_DATA of `qos` (a DataWriterQos or DataReaderQos), unless it holds it
-// already: whether it changed (then the caller sets the QoS).
+// `data` with `mark` appended, as the USER_DATA of `qos` (a DataWriterQos or DataReaderQos).
+template <typename Qos>
+void store_with_mark(Qos &qos, std::vector<eprosima::fastdds::rtps::octet> &data,
+                     const char *mark) {
+  data.insert(data.end(), mark, mark + std::strlen(mark));
+  qos.user_data().resize(data.size());  // as rmw_fastrtps sets it
+  qos.user_data().setValue(data);
+}
+
+// `mark` appended to the USER_DATA of `qos`, unless it holds it already: whether it changed (then
+// the caller sets the QoS).
 template <typename Qos>
 bool append_mark(Qos &qos, const char *mark) {
   std::vector<eprosima::fastdds::rtps::octet> data = qos.user_data().data_vec();
   if (user_data_holds(data, mark)) return false;
-  data.insert(data.end(), mark, mark + std::strlen(mark));
-  qos.user_data().resize(data.size());  // as rmw_fastrtps sets it
-  qos.user_data().setValue(data);
+  store_with_mark(qos, data, mark);
   return true;
 }
 
@@ -59,9 +66,7 @@ bool replace_mark(Qos &qos, const char *prefix, const char *mark) {
     if (std::equal(at, end, mark, mark + std::strlen(mark))) return false;
     data.erase(at, end);
   }
-  data.insert(data.end(), mark, mark + std::strlen(mark));
-  qos.user_data().resize(data.size());
-  qos.user_data().setValue(data);
+  store_with_mark(qos, data, mark);
   return true;
 }
 

@@ -15,7 +15,6 @@
 #include <stdlib.h>
 #include <string.h>
 
-#include <time.h>
 
 #include "_fastdds_layout.h"
 #include "_filter_class.h"
@@ -57,12 +56,6 @@ static void *node_compile(const char *expression) { return cft_node_compile(expr
 // the loaded library's: the sample is passed, as to a plain reader, and counted.
 static unsigned long rate_layout_mismatches;
 
-static int64_t monotonic_ns(void) {
-  struct timespec now;
-  clock_gettime(CLOCK_MONOTONIC, &now);
-  return (int64_t)now.tv_sec * 1000000000 + now.tv_nsec;
-}
-
 static void *rate_compile(const char *expression) {
   return CFT_LAYOUT_KNOWN ? cft_rate_compile(expression) : NULL;
 }
@@ -78,7 +71,7 @@ static bool rate_decide(void *program, const void *payload, const void *sample_i
     __atomic_fetch_add(&rate_layout_mismatches, 1, __ATOMIC_RELAXED);
     return true;
   }
-  return cft_rate_decide(program, writer, monotonic_ns());
+  return cft_rate_decide(program, writer, cft_rate_now_ns());
 #else
   (void)program, (void)payload, (void)sample_info;
   return true;
@@ -92,7 +85,7 @@ unsigned long cft_rate_layout_mismatches(void) {
 static void rate_carry(void *program, const void *replaced) { cft_rate_carry(program, replaced); }
 
 static bool rate_open(const void *program, const uint8_t *writer_guid) {
-  return cft_rate_open(program, writer_guid, monotonic_ns());
+  return cft_rate_open(program, writer_guid, cft_rate_now_ns());
 }
 
 static const struct cft_filter_grammar uuid_grammar = {uuid_compile, uuid_matches, NULL, NULL};

@@ -5,6 +5,7 @@
 
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 // Writers a reader's program tells apart. A writer beyond them is passed unfiltered (as to a plain
 // reader); a writer-side program sees one writer only, its own.
@@ -96,6 +97,12 @@ bool cft_rate_open(const struct rate_program *p, const uint8_t *writer_guid, int
   // a writer first seen gets the last poll's count; one beyond the table is passed unfiltered
   if (w == NULL) return p->writers == RATE_WRITERS || !p->polling || p->last > 0;
   return writer_open(p, w, now_ns);
+}
+
+int64_t cft_rate_now_ns(void) {
+  struct timespec now;
+  clock_gettime(CLOCK_MONOTONIC, &now);
+  return (int64_t)now.tv_sec * 1000000000 + now.tv_nsec;
 }
 
 bool cft_rate_decide(struct rate_program *p, const uint8_t *writer_guid, int64_t now_ns) {

@@ -26,6 +26,8 @@ struct rate_program *cft_rate_compile(const char *expression);
 // at `now_ns` (CLOCK_MONOTONIC); updates the writer's state. Not thread-safe: the caller holds
 // the filter's lock exclusively.
 bool cft_rate_decide(struct rate_program *p, const uint8_t *writer_guid, int64_t now_ns);
+// The clock of the verdicts: CLOCK_MONOTONIC, in ns.
+int64_t cft_rate_now_ns(void);
 // Whether a sample of that writer at `now_ns` would pass, without deciding it (no state changes).
 // The caller holds the filter's lock, shared at least.
 bool cft_rate_open(const struct rate_program *p, const uint8_t *writer_guid, int64_t now_ns);

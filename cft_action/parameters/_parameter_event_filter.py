@@ -240,11 +240,8 @@ class ParameterEventFilter:
     def _mark_reader(self, subscription: Subscription) -> None:
         """Where the node class cannot be the reader's filter: mark the reader with the program
         (Fast DDS 3.3+), so that guarded nodes' writers send only the watched nodes' events."""
-        with subscription.handle:
-            pointer = subscription.handle.pointer
-        self._mark, refused = ProgramMark.install(subscription.handle, pointer,
-                                                  _rcl.NODE_FILTER_CLASS,
-                                                  self._wanted()[2].filter_expression)
+        self._mark, _ = ProgramMark.install(subscription, _rcl.NODE_FILTER_CLASS,
+                                            self._wanted()[2].filter_expression)
         if self._mark is not None:
             self._logger.info(
                 'the parameter event subscription asks nodes that run under cft-action guard '

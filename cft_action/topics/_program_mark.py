@@ -19,6 +19,8 @@ from __future__ import annotations
 
 from typing import Any, ContextManager, Iterable, Optional
 
+from rclpy.subscription import Subscription
+
 from cft_action import _rcl
 
 __all__ = ['ProgramMark', 'REREAD_S']
@@ -44,10 +46,12 @@ class ProgramMark:
         self.updates = 0  # changes after the first mark
 
     @classmethod
-    def install(cls, handle: ContextManager[Any], pointer: int, filter_class: str,
+    def install(cls, subscription: Subscription, filter_class: str,
                 expression: str) -> tuple[Optional[ProgramMark], str]:
-        """Mark the reader with its first program: the mark, or None and why not."""
-        mark = cls(handle, pointer, filter_class)
+        """Mark ``subscription``'s reader with its first program: the mark, or None and why not."""
+        with subscription.handle:
+            pointer = subscription.handle.pointer
+        mark = cls(subscription.handle, pointer, filter_class)
         why = mark._set(expression)
         return (None, why) if why else (mark, '')
 

@@ -105,10 +105,6 @@ class _Publisher:
         self.remaining = remaining  # polled messages still to pass
 
 
-#: How long a publisher that does not apply the reader's mark is taken to stay so, in seconds.
-_ROUTES_RECHECK_S = REREAD_S
-
-
 class RateFilter:
     """One subscription's rate limit and polls: the expression that says them, and, where the class
     cannot be used, the same rule applied in this process, per publisher.
@@ -181,7 +177,8 @@ class RateFilter:
             return False
         known = self._routed.get(gid)
         now = time.monotonic()
-        if known is None or (not known[0] and now - known[1] >= _ROUTES_RECHECK_S):
+        # a publisher that does not apply the mark may do so once its writer has read it
+        if known is None or (not known[0] and now - known[1] >= REREAD_S):
             known = (bool(self.mark.routes(gid)), now)
             self._routed[gid] = known
         return known[0]

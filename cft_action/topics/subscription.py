@@ -204,10 +204,8 @@ def _mark_rate_reader(node: Node, subscription: Subscription,
     """Where the rate class cannot filter ``subscription``'s reader: mark the reader so that guarded
     Fast DDS 3.3+ publishers apply the rule (the callback's gate applies it to every publisher
     anyway), and say once where the rule is applied."""
-    with subscription.handle:
-        pointer = subscription.handle.pointer
-    rate_filter.mark, refused = ProgramMark.install(
-        subscription.handle, pointer, _rcl.RATE_FILTER_CLASS, rate_filter.writer_expression())
+    rate_filter.mark, refused = ProgramMark.install(subscription, _rcl.RATE_FILTER_CLASS,
+                                                    rate_filter.writer_expression())
     node.get_logger().info(
         f'{subscription.topic_name}: max_rate and poll are applied in this process (per '
         'publisher where rclpy says which one sent a message), since its DDS reader cannot '

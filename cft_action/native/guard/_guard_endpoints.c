@@ -324,20 +324,20 @@ static const struct routed_kind {
   void (*routed)(void);             // counts it
   long (*heartbeat_ms)(void);       // its writer's heartbeat period at most (0: Fast DDS's); NULL
   void (*heartbeat_set)(void);      // counts a writer given it
+  bool failures_once;               // any publisher may be one: a failure is said once
 } kinds[] = {
   {"feedback", &feedback_verdict, CFT_READER_MARK, cft_feedback_is_topic, cft_feedback_unroutable,
-   cft_feedback_writer_routed, NULL, NULL},
+   cft_feedback_writer_routed, NULL, NULL, false},
   {"status", &status_verdict, CFT_STATUS_READER_MARK, cft_status_is_topic, cft_status_unroutable,
-   cft_status_reader_kept, cft_status_heartbeat_ms, cft_status_heartbeat_set},
+   cft_status_reader_kept, cft_status_heartbeat_ms, cft_status_heartbeat_set, false},
   {"samples", &program_verdict, CFT_PROGRAM_READER_MARK, cft_programs_is_topic,
-   cft_programs_unroutable, cft_programs_writer_routed, NULL, NULL},
+   cft_programs_unroutable, cft_programs_writer_routed, NULL, NULL, true},
 };
 #define KINDS ((int)(sizeof kinds / sizeof kinds[0]))
 
-static bool program_failure_said;
-
 // `publisher`, of `topic`, one of `kind`'s, in a process of Fast DDS 3, gets its samples routed,
-// or says why not (once, for the programs' kind).
+// or says why not (once, for a kind with failures_once).
+static bool failure_said[KINDS];
 static void route(const void *publisher, const char *topic, int kind) {
   const struct routed_kind *k = &kinds[kind];
   const char *unroutable = k->unroutable();
@@ -357,12 +357,12 @@ static void route(const void *publisher, const char *topic, int kind) {
   if (routing != NULL && set_routing(publisher, routing)) {
     k->routed();
     if (heartbeat_ms > 0) k->heartbeat_set();
-  } else if (k->verdict != &program_verdict || cft_first(&program_failure_said)) {
+  } else if (!k->failures_once || cft_first(&failure_said[kind])) {
     cft_say("the %s of %.200s goes to every reader: %s (%d)%s", k->what, topic,
             writer == NULL ? "it has no rmw_fastrtps_cpp writer"
             : routing == NULL ? "its DataWriter refused the prefilter or the mark"
                               : "too many routed publishers", (int)error,
-            k->verdict == &program_verdict ? " (said once for all publishers)" : "");
+            k->failures_once ? " (said once for all publishers)" : "");
   }
 }
 

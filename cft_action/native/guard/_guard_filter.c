@@ -432,22 +432,8 @@ static void drop(const void *writer, const void *reader_guid, int why) {
 // like the library's but none of them has no factory. Either way the writer sends that reader
 // every sample, as to a plain reader. Each is counted; the first of each kind is said, once.
 
-// `text` (remote bytes) for a log line: printable ASCII as is, any other byte as \xNN, at most
-// `limit` bytes of it, then "..." if there was more.
 static const char *printable(char *out, size_t size, const char *text, size_t limit) {
-  size_t n = 0;
-  const unsigned char *c = (const unsigned char *)text;
-  for (size_t i = 0; c[i] != '\0' && n + 8 < size; i++) {
-    if (i == limit) {
-      memcpy(out + n, "...", 3);
-      n += 3;
-      break;
-    }
-    if (c[i] >= 0x20 && c[i] < 0x7f && c[i] != '\\' && c[i] != '"') out[n++] = (char)c[i];
-    else n += (size_t)snprintf(out + n, size - n, "\\x%02x", c[i]);
-  }
-  out[n] = '\0';
-  return out;
+  return cft_printable(out, size, text, strlen(text), limit);
 }
 
 void cft_filter_refused(const char *class_name, const char *type_name, const char *expression) {

@@ -15,6 +15,22 @@ int cft_debug_enabled(void) {
   return v != NULL && v[0] != '\0' && strcmp(v, "0") != 0;
 }
 
+const char *cft_printable(char *out, size_t size, const char *text, size_t length, size_t limit) {
+  size_t n = 0;
+  const unsigned char *c = (const unsigned char *)text;
+  for (size_t i = 0; i < length && c[i] != '\0' && n + 8 < size; i++) {
+    if (i == limit) {
+      memcpy(out + n, "...", 3);
+      n += 3;
+      break;
+    }
+    if (c[i] >= 0x20 && c[i] < 0x7f && c[i] != '\\' && c[i] != '"') out[n++] = (char)c[i];
+    else n += (size_t)snprintf(out + n, size - n, "\\x%02x", c[i]);
+  }
+  out[n] = '\0';
+  return out;
+}
+
 bool cft_first(bool *flag) { return !__atomic_exchange_n(flag, true, __ATOMIC_RELAXED); }
 
 void cft_say(const char *fmt, ...) {

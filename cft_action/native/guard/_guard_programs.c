@@ -30,7 +30,6 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
-#include <time.h>
 
 #include "_filter_class.h"
 #include "_guard_feedback.h"
@@ -58,20 +57,12 @@ struct program {
   void *program;  // struct rate_program * or struct node_program *
 };
 
-// `text` (a remote reader's bytes) for a log line: printable ASCII as is, else '?', at most 60.
-static void shown(char *out, size_t size, const char *text, uint32_t length) {
-  size_t n = 0;
-  for (uint32_t i = 0; i < length && n + 1 < size && i < 60; i++)
-    out[n++] = text[i] >= 0x20 && text[i] < 0x7f ? text[i] : '?';
-  out[n] = '\0';
-}
-
 static int refused(const char *value, uint32_t length) {
   count(REFUSED);
   static bool said;
   if (cft_first(&said)) {
-    char text[64];
-    shown(text, sizeof text, value, length);
+    char text[256];
+    cft_printable(text, sizeof text, value, length, 60);
     cft_say("a reader marked a program outside %s's and %s's grammars: it gets every sample "
             "(\"%s\"; said once, cft_guard_program_count counts each)", CFT_RATE_CLASS,
             CFT_NODE_CLASS, text);
@@ -110,11 +101,7 @@ int cft_program_update(void **state, const char *value, uint32_t length) {
 static const uint8_t THE_WRITER[16];
 
 static bool passes(struct program *p, const uint8_t *data, uint32_t length) {
-  if (p->rate) {
-    struct timespec now;
-    clock_gettime(CLOCK_MONOTONIC, &now);
-    return cft_rate_decide(p->program, THE_WRITER, (int64_t)now.tv_sec * 1000000000 + now.tv_nsec);
-  }
+  if (p->rate) return cft_rate_decide(p->program, THE_WRITER, cft_rate_now_ns());
   uint32_t node_length;
   const char *node = cft_event_node_bytes(data, length, &node_length);
   if (node == NULL) {
